@@ -81,7 +81,12 @@ def cmd_run(args) -> int:
     return 0
 
 
+#: modules that add a subcommand: each defines ``register(subparsers)`` (add_parser + set_defaults(func=...))
+SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.ssp_run")
+
+
 def main(argv: list[str] | None = None) -> int:
+    import importlib
     parser = argparse.ArgumentParser(prog="python -m mechanism", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="simulate the paper's slider-crank once and write CSV, JSON and PNG")
@@ -90,6 +95,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-ideal", action="store_true", help="do not run the ideal-joint counterpart")
     p.add_argument("--no-plots", action="store_true", help="write CSV and JSON only")
     p.set_defaults(func=cmd_run)
+    for name in SUBCOMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as err:
+            if err.name != name:
+                raise
+            continue
+        module.register(sub)
     args = parser.parse_args(argv)
     try:
         return args.func(args)
