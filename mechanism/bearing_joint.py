@@ -37,22 +37,30 @@ class BearingLink:
 
     def inputs(self, q: np.ndarray, qd: np.ndarray) -> tuple[float, float, float, float, float, float]:
         """(e_x, e_y, v_x, v_y, omega_inner, omega_outer): eq. (10)-(12), ring speeds for eq. (16)."""
-        s, jt = self.system, self.joint
-        e = s.point_position(q, jt.journal) - s.point_position(q, jt.housing)              # eq. (10)
-        v = s.point_velocity(q, qd, jt.journal) - s.point_velocity(q, qd, jt.housing)      # eq. (11)-(12)
-        return float(e[0]), float(e[1]), float(v[0]), float(v[1]), float(qd[self._theta_j]), float(qd[self._theta_i])
+        xi, yi, vxi, vyi = self.system.point_state(q, qd, self.joint.housing)
+        xj, yj, vxj, vyj = self.system.point_state(q, qd, self.joint.journal)
+        return xj - xi, yj - yi, vxj - vxi, vyj - vyi, float(qd[self._theta_j]), float(qd[self._theta_i])
 
-    def generalized_force(self, q: np.ndarray, e_x: float, e_y: float, F_x: float, F_y: float) -> np.ndarray:
-        """Generalized forces of F on the housing body and -F on the journal body, eq. (20)-(23)."""
+    def generalized_force(self, q: np.ndarray, e_x: float, e_y: float, F_x: float, F_y: float,
+                          Q: np.ndarray | None = None) -> np.ndarray:
+        """Generalized forces of F on the housing body and -F on the journal body, eq. (20)-(23).
+
+        Added into ``Q`` in place if given (and returned), else into a new vector.
+        """
         s, jt = self.system, self.joint
-        f = np.array((F_x, F_y))
+        Q = np.zeros(s.n) if Q is None else Q
+        at_i = at_j = None
         if self.contact_points == "eq15":
             e = math.hypot(e_x, e_y)
-            n = np.array((e_x / e, e_y / e)) if e > 0.0 else np.zeros(2)                    # eq. (14)
-            at_i = s.point_position(q, jt.housing) + jt.housing_radius * n                  # eq. (15)
-            at_j = s.point_position(q, jt.journal) + jt.journal_radius * n
-            return s.point_force(q, jt.housing, f, at=at_i) + s.point_force(q, jt.journal, -f, at=at_j)
-        return s.point_force(q, jt.housing, f) + s.point_force(q, jt.journal, -f)
+            if e > 0.0:
+                nx, ny = e_x / e, e_y / e                                            # eq. (14)
+                xi, yi = s.point_state(q, None, jt.housing)[:2]
+                xj, yj = s.point_state(q, None, jt.journal)[:2]
+                at_i = (xi + jt.housing_radius * nx, yi + jt.housing_radius * ny)    # eq. (15)
+                at_j = (xj + jt.journal_radius * nx, yj + jt.journal_radius * ny)
+        s.add_point_force(Q, q, jt.housing, F_x, F_y, at_i)                           # eq. (20)-(21)
+        s.add_point_force(Q, q, jt.journal, -F_x, -F_y, at_j)                         # eq. (22)-(23)
+        return Q
 
     def mobility(self, q: np.ndarray, t: float) -> float:
         """Largest eigenvalue [1/kg] of the 2x2 map from an action-reaction pair at the rings to the

@@ -119,7 +119,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     def record(t, q, qd, force):
         Q = applied(q, qd, t)
         if link is not None:
-            Q = Q + link.generalized_force(q, state["inputs"][0], state["inputs"][1], *force)
+            link.generalized_force(q, state["inputs"][0], state["inputs"][1], *force, Q)
         qdd, lam = system.accelerations(q, qd, t, Q)
         row = observe(q, qd, qdd, lam, t)
         if link is not None:
@@ -141,7 +141,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
         if link is not None:
             ex, ey, vx, vy, _, _ = link.inputs(q, qd)
             Fx, Fy = scheme.force(tau, ex, ey, vx, vy)
-            Q = Q + link.generalized_force(q, ex, ey, Fx, Fy)
+            link.generalized_force(q, ex, ey, Fx, Fy, Q)
         qdd = system.accelerations(q, qd, tau, Q)[0]
         return np.concatenate((qd, qdd))
 

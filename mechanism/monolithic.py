@@ -55,7 +55,7 @@ def run_monolithic(system: System, link: BearingLink, bearing: BallBearing, q0: 
         ex, ey, vx, vy, wi, wo = link.inputs(q, qd)
         bearing.check_inputs(ex, ey, vx, vy, wi, wo)
         f = bearing.evaluate(ex, ey, vx, vy, cage, wi, wo, out_loads)
-        Q = system.applied_forces(q, qd, t) + link.generalized_force(q, ex, ey, f.F_x, f.F_y)
+        Q = link.generalized_force(q, ex, ey, f.F_x, f.F_y, system.applied_forces(q, qd, t))
         return Q, f, (ex, ey, vx, vy, wi, wo)
 
     def rhs(t, y):

@@ -19,8 +19,8 @@ def crank_pi(r: RunResult) -> np.ndarray:
 
 
 def half_clearance(r: RunResult) -> float:
-    settings = r.meta.get("config", {}).get("settings", {})
-    return 0.5 * float(settings.get("radial_clearance", BearingParameters().radial_clearance))
+    """Free play per side [m] recorded by the run (P_d/2 for the ball bearing)."""
+    return float(r.meta.get("clearance_per_side_m", 0.5 * BearingParameters().radial_clearance))
 
 
 def _save(fig, path: Path) -> Path:
@@ -36,7 +36,7 @@ def plot_trajectory(ax, r: RunResult, label: str | None = None, clearance: bool 
     if clearance:
         phi = np.linspace(0, 2 * np.pi, 200)
         c = half_clearance(r) * 1e6
-        ax.plot(c * np.cos(phi), c * np.sin(phi), "k--", lw=0.6, label="clearance P_d/2")
+        ax.plot(c * np.cos(phi), c * np.sin(phi), "k--", lw=0.6, label="clearance (per side)")
     ax.set_xlabel("e_x [µm]")
     ax.set_ylabel("e_y [µm]")
     ax.set_aspect("equal", adjustable="datalim")

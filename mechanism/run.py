@@ -79,6 +79,17 @@ def fmu_path(config: RunConfig) -> Path:
     return path
 
 
+def clearance_per_side(config: RunConfig) -> float:
+    """Free play of the joint per side [m]: P_d/2 for the ball bearing, c for the journal-bushing joint."""
+    if config.joint == "bearing":
+        return 0.5 * bearing_parameters(config.component_settings).radial_clearance
+    if config.joint == "clearance":
+        from fmu_bearing.clearance_joint import ClearanceParameters
+        value = config.settings.get("radial_clearance")
+        return float(value) if value is not None else ClearanceParameters().radial_clearance
+    return 0.0
+
+
 def slider_crank_observer(system: System):
     """observe(q, qd, qdd, lam, t): crank angle, slider position/velocity/acceleration, crank moment (SI)."""
     crank, slider = system.slice("crank"), system.slice("slider")
@@ -108,7 +119,8 @@ def run(config: RunConfig) -> RunResult:
     q0, qd0 = initial_state(system, params)
     observe = slider_crank_observer(system)
     t_end = config.revs * config.crank_period
-    meta = {"config": asdict(config), "crank_period_s": config.crank_period}
+    meta = {"config": asdict(config), "crank_period_s": config.crank_period,
+            "clearance_per_side_m": clearance_per_side(config)}
     label = f"{config.joint} {config.mode} {config.rpm:g} rpm"
     settings = MasterSettings(t_end=t_end, step=config.step, output_interval=config.output_interval,
                               scheme=config.scheme, progress=config.progress, description=label)

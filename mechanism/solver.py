@@ -36,6 +36,8 @@ A System holds scratch buffers: it is not thread-safe.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.linalg import lapack
 
@@ -212,29 +214,34 @@ class System:
         """Slice of a joint's equations in Phi (model order), hence of its multipliers."""
         return self._rows[joint_name]
 
+    def point_state(self, q: np.ndarray, qd: np.ndarray | None, point: Point) -> tuple[float, float, float, float]:
+        """(x, y, xd, yd) of a point as floats: r^P = r + A s' (eq. 10), rd^P = rd + thd B s' (eq. 11-12).
+
+        The scalar fast path of ``point_position``/``point_velocity`` (one home for both);
+        velocities are 0 if ``qd`` is None.
+        """
+        if point.body == GROUND:
+            return float(point.local[0]), float(point.local[1]), 0.0, 0.0
+        i = 3 * self._index[point.body]
+        th = float(q[i + 2])
+        c, s = math.cos(th), math.sin(th)
+        sx, sy = point.local
+        ux, uy = c * sx - s * sy, s * sx + c * sy
+        if qd is None:
+            return float(q[i]) + ux, float(q[i + 1]) + uy, 0.0, 0.0
+        thd = float(qd[i + 2])
+        return float(q[i]) + ux, float(q[i + 1]) + uy, float(qd[i]) - thd * uy, float(qd[i + 1]) + thd * ux
+
     def point_position(self, q: np.ndarray, point: Point) -> np.ndarray:
         """Global position r^P = r + A s' [m] of a point (eq. 10)."""
-        if point.body == GROUND:
-            return np.array(point.local, float)
-        x, y, th = q[self.slice(point.body)]
-        c, s = np.cos(th), np.sin(th)
-        sx, sy = point.local
-        return np.array([x + c * sx - s * sy, y + s * sx + c * sy])
+        return np.array(self.point_state(q, None, point)[:2])
 
     def point_velocity(self, q: np.ndarray, qd: np.ndarray, point: Point) -> np.ndarray:
         """Global velocity rd^P = rd + thd B s' [m/s] of a point (eq. 11-12).
 
         Linear in qd: passing accelerations with zero velocities gives rdd + thdd B s'.
         """
-        if point.body == GROUND:
-            return np.zeros(2)
-        sl = self.slice(point.body)
-        th = q[sl][2]
-        xd, yd, thd = qd[sl]
-        c, s = np.cos(th), np.sin(th)
-        sx, sy = point.local
-        ux, uy = c * sx - s * sy, s * sx + c * sy
-        return np.array([xd - thd * uy, yd + thd * ux])
+        return np.array(self.point_state(q, qd, point)[2:])
 
     def phi(self, q: np.ndarray, t: float) -> np.ndarray:
         """Constraint violations Phi(q, t) (eq. 3), model order [m, rad]."""
@@ -267,14 +274,19 @@ class System:
         [Fx, Fy, ((r_at - r_body) x F)_z] in the body's slot; zero for GROUND.
         """
         Q = np.zeros(self.n)
-        if point.body == GROUND:
-            return Q
-        sl = self.slice(point.body)
-        r_at = self.point_position(q, point) if at is None else np.asarray(at, float)
-        arm = r_at - q[sl][:2]
-        fx, fy = float(force[0]), float(force[1])
-        Q[sl] = (fx, fy, arm[0] * fy - arm[1] * fx)
+        self.add_point_force(Q, q, point, float(force[0]), float(force[1]), at)
         return Q
+
+    def add_point_force(self, Q: np.ndarray, q: np.ndarray, point: Point, fx: float, fy: float,
+                        at: tuple[float, float] | np.ndarray | None = None) -> None:
+        """Add to Q (in place) the generalized force of (fx, fy) [N] at ``point`` or at the global ``at``."""
+        if point.body == GROUND:
+            return
+        i = 3 * self._index[point.body]
+        ax, ay = self.point_state(q, None, point)[:2] if at is None else (float(at[0]), float(at[1]))
+        Q[i] += fx
+        Q[i + 1] += fy
+        Q[i + 2] += (ax - float(q[i])) * fy - (ay - float(q[i + 1])) * fx
 
     def accelerations(self, q: np.ndarray, qd: np.ndarray, t: float,
                       Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
