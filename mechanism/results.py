@@ -103,10 +103,9 @@ def summary(r: RunResult) -> dict:
     if len(t) == 0:
         return result
     result["all"] = _figures(r, np.ones_like(t, dtype=bool))
-    if period:
+    if period and t[-1] >= 2 * period - 1e-9:
         rev2 = (t >= period - 1e-12) & (t <= 2 * period + 1e-12)
-        if rev2.any():
-            result["rev2"] = _figures(r, rev2)
+        result["rev2"] = _figures(r, rev2)
     return result
 
 
