@@ -62,7 +62,8 @@ def config_from_args(args) -> "RunConfig":
 def cmd_run(args) -> int:
     from dataclasses import replace
     from .run import run, write_outputs
-    config = config_from_args(args)
+    from .ssp_run import config_from_ssp_args
+    config = config_from_ssp_args(args) if args.ssp else config_from_args(args)
     result = run(config)
     ideal = None
     if config.joint != "ideal" and not args.no_ideal:
@@ -91,6 +92,8 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="simulate the paper's slider-crank once and write CSV, JSON and PNG")
     add_run_arguments(p)
+    from .ssp_run import add_ssp_arguments
+    add_ssp_arguments(p)
     p.add_argument("--out", default="results/run", help="output folder (default results/run)")
     p.add_argument("--no-ideal", action="store_true", help="do not run the ideal-joint counterpart")
     p.add_argument("--no-plots", action="store_true", help="write CSV and JSON only")

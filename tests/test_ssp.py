@@ -1,0 +1,408 @@
+"""The SSP of the slider-crank with the ball bearing: generated files, schema, reading, bad input,
+the SliderCrank FMU, and our master on the SSP (``run --ssp``)."""
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import shutil
+import zipfile
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import build_fmu
+from conftest import built_fmu
+from fmu_bearing.parameters import BearingParameters
+from mechanism import ssp_model as sm
+from mechanism import ssp_run
+from mechanism.slider_crank import SliderCrankParameters
+
+H = 1e-5
+T_SHORT = 0.002       # s: 200 steps, for the quick checks
+
+
+@pytest.fixture(scope="session")
+def slider_crank_fmu(tmp_path_factory) -> Path:
+    return build_fmu.build_slider_crank(tmp_path_factory.mktemp("fmu_SliderCrank"), verbose=False)
+
+
+@pytest.fixture(scope="session")
+def ssp_archive(tmp_path_factory, slider_crank_fmu) -> Path:
+    """dist-like SliderCrankBearing.ssp packed from ssp/ and freshly built FMUs."""
+    bearing = built_fmu("BallBearing", tmp_path_factory)
+    out = tmp_path_factory.mktemp("ssp") / sm.ARCHIVE_NAME
+    return sm.pack(out, {"SliderCrank": slider_crank_fmu, "BallBearing": bearing})
+
+
+# ----------------------------------------------------------------------------------------------
+# generated files and schema
+# ----------------------------------------------------------------------------------------------
+def test_committed_ssp_files_equal_what_the_dataclass_defaults_produce():
+    """The dataclasses are the source: ssp/ must be what `python -m mechanism ssp-generate` writes."""
+    expected = sm.expected_files()
+    on_disk = {p.relative_to(sm.SOURCE_DIR).as_posix() for p in sm.SOURCE_DIR.rglob("*.ss[dv]")}
+    assert on_disk == set(expected), "ssp/ has stale or missing files: run `python -m mechanism ssp-generate`"
+    for rel, text in expected.items():
+        assert (sm.SOURCE_DIR / rel).read_text(encoding="utf-8") == text, \
+            f"ssp/{rel} drifted from the dataclass defaults: run `python -m mechanism ssp-generate`"
+
+
+def test_parameter_sets_hold_the_dataclass_defaults(ssp_archive):
+    with sm.load_ssp(ssp_archive) as system:
+        default = system.parameters()
+        assert system.parameter_set_names[0] == sm.DEFAULT_PARAMETER_SET
+        assert default["bearing"] == BearingParameters().as_dict()
+        assert default["mechanism"] == {k: getattr(SliderCrankParameters(), k) for k in default["mechanism"]}
+        for rpm in (300, 600, 900, 1200):
+            values = system.parameters(f"BB1B420205-{rpm}rpm")
+            assert values["mechanism"]["rpm"] == rpm and values["bearing"] == BearingParameters().as_dict()
+        for n in (15, 20):
+            bearing = system.parameters(f"BB1B420205-{n}balls-1200rpm")["bearing"]
+            assert bearing == BearingParameters(n_balls=n, allow_ball_overlap=True).as_dict()
+
+
+def test_ssd_and_ssv_validate_against_the_ssp_1_0_schema(ssp_archive):
+    from fmpy.ssp.ssd import read_ssd, read_ssv
+    ssd = read_ssd(str(ssp_archive), validate=True)          # fmpy validates against the SSP schema it ships
+    assert {c.name: c.source for c in ssd.system.elements} == {
+        "mechanism": "resources/SliderCrank.fmu", "bearing": "resources/BallBearing.fmu"}
+    assert len(ssd.system.connections) == len(sm.CONNECTIONS)
+    for spec in sm.PARAMETER_SETS:
+        for component in sm.COMPONENTS:
+            pset = read_ssv(str(ssp_archive), resource=sm.ssv_path(spec.name, component), validate=True)
+            assert pset.name == spec.name
+    sm.validate_schema(sm.SOURCE_SSD, "SystemStructureDescription.xsd")
+
+
+def test_pyssp_standard_reads_the_same_parameter_values():
+    pyssp = pytest.importorskip("pyssp_standard", reason="pyssp-standard is not installed (pip install pyssp-standard)")
+    for spec in sm.PARAMETER_SETS[:1] + sm.PARAMETER_SETS[-1:]:
+        for component in sm.COMPONENTS:
+            with pyssp.SSV(sm.SOURCE_DIR / sm.ssv_path(spec.name, component)) as ssv:
+                read = {p["name"]: p["type_value"].parameter["value"] for p in ssv.parameters}
+            expected = spec.values(component)
+            assert set(read) == set(expected)
+            for name, value in expected.items():
+                got = read[name]
+                if isinstance(value, bool):
+                    assert str(got).lower() == str(value).lower()
+                else:
+                    assert float(got) == pytest.approx(float(value), rel=1e-15)
+
+
+def test_load_ssp_reads_connectors_with_units_and_connections(ssp_archive):
+    with sm.load_ssp(ssp_archive) as system:
+        mech, bear = system.components["mechanism"], system.components["bearing"]
+        assert (mech.model_name, bear.model_name) == ("SliderCrank", "BallBearing")
+        units = {name: c.unit for name, c in {**mech.connectors, **bear.connectors}.items()}
+        assert units["e_x"] == "m" and units["v_y"] == "m/s" and units["omega_inner"] == "rad/s"
+        assert units["F_x"] == "N" and units["stiffness_xy"] == "N/m" and units["damping_yy"] == "N.s/m"
+        assert len(system.connections) == 14 and system.step_size == H
+        assert all(bear.connectors[c.end_connector].kind == "input" for c in system.connections
+                   if c.end_element == "bearing")
+        assert system.workdir.is_dir() and mech.fmu.is_file()
+    assert system.workdir is None
+
+
+# ----------------------------------------------------------------------------------------------
+# bad input: each problem named with its file and element, before any simulation
+# ----------------------------------------------------------------------------------------------
+def _edit(archive: Path, tmp_path: Path, member: str, edit=None, drop: bool = False) -> Path:
+    out = tmp_path / "bad.ssp"
+    with zipfile.ZipFile(archive) as src, zipfile.ZipFile(out, "w") as dst:
+        for item in src.infolist():
+            if item.filename == member and drop:
+                continue
+            data = src.read(item.filename)
+            if item.filename == member and edit is not None:
+                text = data.decode("utf-8")
+                changed = edit(text)
+                assert changed != text, f"the edit did not change {member}"
+                data = changed.encode("utf-8")
+            dst.writestr(item, data)
+    return out
+
+
+SSD = sm.SSD_IN_ARCHIVE
+BEARING_SSV = sm.ssv_path(sm.DEFAULT_PARAMETER_SET, "bearing")
+MECH_SSV = sm.ssv_path(sm.DEFAULT_PARAMETER_SET, "mechanism")
+
+
+def _param(name, kind, old, new):
+    return lambda t: t.replace(f'<ssv:Parameter name="{name}">\n      <ssv:{kind} value="{old}"',
+                               f'<ssv:Parameter name="{name}">\n      <ssv:{kind} value="{new}"')
+
+
+BAD = {
+    "missing FMU resource": (
+        dict(member="resources/BallBearing.fmu", drop=True), SSD, "Component 'bearing'", "missing FMU resource"),
+    "unknown connector on a component": (
+        dict(member=SSD, edit=lambda t: t.replace('<ssd:Connector name="slider_v"', '<ssd:Connector name="slider_w"')),
+        SSD, "Connector 'mechanism.slider_w'", "unknown connector"),
+    "unknown connector in a connection": (
+        dict(member=SSD, edit=lambda t: t.replace('startConnector="omega_outer" endElement="bearing"',
+                                                  'startConnector="omega_housing" endElement="bearing"')),
+        SSD, "Connection mechanism.omega_housing -> bearing.omega_outer", "unknown connector"),
+    "unit mismatch on a connection": (
+        dict(member=SSD, edit=lambda t: t.replace('endElement="bearing" endConnector="e_x"',
+                                                  'endElement="bearing" endConnector="v_x"')),
+        SSD, "Connection mechanism.e_x -> bearing.v_x", "unit mismatch: [m] to [m/s]"),
+    "connector unit unlike the FMU's": (
+        dict(member=SSD, edit=lambda t: t.replace('<ssd:Connector name="F_x" kind="input">\n            <ssc:Real unit="N"',
+                                                  '<ssd:Connector name="F_x" kind="input">\n            <ssc:Real unit="kN"')),
+        SSD, "Connector 'mechanism.F_x'", "unit mismatch"),
+    "parameter not in the FMU": (
+        dict(member=BEARING_SSV, edit=lambda t: t.replace('name="n_balls"', 'name="ball_count"')),
+        BEARING_SSV, "Parameter 'ball_count'", "parameter not in the FMU"),
+    "value above the FMU's max": (
+        dict(member=BEARING_SSV, edit=_param("n_balls", "Integer", 8, 50)),
+        BEARING_SSV, "Parameter 'n_balls'", "out of range: above the FMU's max 20"),
+    "value below the FMU's min": (
+        dict(member=MECH_SSV, edit=_param("crank_mass", "Real", 0.3, -0.3)),
+        MECH_SSV, "Parameter 'crank_mass'", "out of range: below the FMU's min 0"),
+    "value outside the bearing's validation": (
+        dict(member=BEARING_SSV, edit=_param("poisson_ratio", "Real", 0.3, 0.7)),
+        BEARING_SSV, "Parameter 'poisson_ratio'", "out of range: must lie in (0, 0.5)"),
+    "balls that do not fit without allow_ball_overlap": (
+        dict(member=sm.ssv_path("BB1B420205-15balls-1200rpm", "bearing"),
+             edit=_param("allow_ball_overlap", "Boolean", "true", "false")),
+        sm.ssv_path("BB1B420205-15balls-1200rpm", "bearing"), "Parameter 'n_balls'", "do not fit"),
+    "parameter type unlike the FMU's": (
+        dict(member=BEARING_SSV, edit=lambda t: t.replace('<ssv:Integer value="8" />', '<ssv:Real value="8.0" />')),
+        BEARING_SSV, "Parameter 'n_balls'", "type Real does not match the FMU's Integer"),
+    "schema violation": (
+        dict(member=SSD, edit=lambda t: t.replace("<ssd:Connections>", "<ssd:Wires>").replace("</ssd:Connections>", "</ssd:Wires>")),
+        SSD, "schema SystemStructureDescription.xsd", "does not validate"),
+    "malformed XML": (
+        dict(member=MECH_SSV, edit=lambda t: t.replace("</ssv:Parameters>", "</ssv:Parameter>")),
+        MECH_SSV, "XML", "not well-formed"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_ssp_is_rejected_naming_file_element_and_problem(ssp_archive, tmp_path, case):
+    edit, member, element, problem = BAD[case]
+    bad = _edit(ssp_archive, tmp_path, **edit)
+    with pytest.raises(sm.SspError) as info:
+        sm.load_ssp(bad)
+    err = info.value
+    assert err.file == f"{bad}!/{member}", str(err)
+    assert err.element == element, str(err)
+    assert problem in err.problem, str(err)
+    assert str(err).startswith(f"{bad}!/{member}: {element}: ")
+    assert not list(tmp_path.glob("ssp_*")), "the unpacked folder is removed on error"
+
+
+def test_bad_ssp_stops_the_tools_and_the_master_before_any_simulation(ssp_archive, tmp_path, monkeypatch):
+    edit, member, element, problem = BAD["unit mismatch on a connection"]
+    bad = _edit(ssp_archive, tmp_path, **edit)
+    import fmpy.ssp.simulation
+    monkeypatch.setattr(fmpy.ssp.simulation, "simulate_ssp", lambda *a, **k: pytest.fail("simulation started"))
+    with pytest.raises(sm.SspError, match="unit mismatch"):
+        ssp_run.simulate_with("fmpy", bad)
+    with pytest.raises(sm.SspError, match="unit mismatch"):
+        ssp_run.config_from_ssp(bad)
+
+
+def test_unknown_parameter_set_and_non_archive_are_rejected(ssp_archive, tmp_path):
+    with pytest.raises(sm.SspError, match=r"Component 'mechanism'|no parameter set named 'BB1B420205-42rpm'") as info:
+        sm.load_ssp(ssp_archive, "BB1B420205-42rpm")
+    assert "BB1B420205-1200rpm" in str(info.value)       # the message lists the sets
+    not_zip = tmp_path / "x.ssp"
+    not_zip.write_text("hello")
+    with pytest.raises(sm.SspError, match="not an SSP archive"):
+        sm.load_ssp(not_zip)
+    no_ssd = _edit(ssp_archive, tmp_path, SSD, drop=True)
+    with pytest.raises(sm.SspError, match="SystemStructure.ssd: missing from the archive"):
+        sm.load_ssp(no_ssd)
+    with pytest.raises(sm.SspError, match="missing FMU resource"):
+        sm.load_ssp(sm.SOURCE_SSD)   # the source folder has no FMUs
+
+
+# ----------------------------------------------------------------------------------------------
+# our master on the SSP: `run --ssp FILE --parameter-set NAME`
+# ----------------------------------------------------------------------------------------------
+def _run_args(*argv):
+    from mechanism.cli import add_run_arguments
+    parser = argparse.ArgumentParser()
+    add_run_arguments(parser)
+    ssp_run.add_ssp_arguments(parser)
+    return parser.parse_args(list(argv))
+
+
+def test_run_ssp_maps_the_parameter_set_onto_run_config(ssp_archive):
+    args = _run_args("--ssp", str(ssp_archive), "--parameter-set", "BB1B420205-20balls-1200rpm",
+                     "--revs", "0.01", "--quiet")
+    config = ssp_run.config_from_ssp_args(args)
+    assert config.rpm == 1200.0 and config.joint == "bearing" and config.revs == 0.01
+    assert config.settings == BearingParameters(n_balls=20, allow_ball_overlap=True).as_dict()
+    assert Path(config.fmu).is_file() and Path(config.fmu).name == "BallBearing.fmu"
+    config600, system = ssp_run.config_from_ssp(ssp_archive, "BB1B420205-600rpm")
+    system.close()
+    assert config600.rpm == 600.0
+    with pytest.raises(ValueError, match="drop --rpm, --set"):
+        ssp_run.config_from_ssp_args(_run_args("--ssp", str(ssp_archive), "--rpm", "600", "--set", "n_balls=9"))
+
+
+def test_run_ssp_refuses_slider_crank_values_run_config_cannot_carry(ssp_archive, tmp_path):
+    bad = _edit(ssp_archive, tmp_path, MECH_SSV, edit=_param("crank_length", "Real", 0.05, 0.06))
+    with pytest.raises(sm.SspError, match="Parameter 'crank_length'.*RunConfig carries rpm and gravity only"):
+        ssp_run.config_from_ssp(bad)
+
+
+# ----------------------------------------------------------------------------------------------
+# the SliderCrank FMU
+# ----------------------------------------------------------------------------------------------
+def test_slider_crank_fmu_is_valid_and_declares_the_interface(slider_crank_fmu):
+    from fmpy import read_model_description
+    from fmpy.validation import validate_fmu
+    assert validate_fmu(str(slider_crank_fmu)) == []
+    md = read_model_description(str(slider_crank_fmu))
+    v = {x.name: x for x in md.modelVariables}
+    assert md.modelName == "SliderCrank" and md.coSimulation.canGetAndSetFMUstate
+    for name, unit in (("F_x", "N"), ("stiffness_xx", "N/m"), ("damping_xy", "N.s/m")):
+        assert v[name].causality == "input" and v[name].unit == unit
+    for name in ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer", "slider_x", "slider_v",
+                 "slider_a", "crank_angle", "crank_moment"):
+        assert v[name].causality == "output" and v[name].initial == "calculated"
+    assert v["rpm"].causality == "parameter" and float(v["rpm"].start) == 1200.0
+    assert float(v["crank_mass"].start) == SliderCrankParameters().crank_mass
+    with zipfile.ZipFile(slider_crank_fmu) as z:
+        names = z.namelist()
+    assert "resources/mechanism/solver.py" in names and "resources/slider_crank_fmu.py" in names
+
+
+class _Pair:
+    """The two FMUs through fmpy's FMU2Slave, stepped by a small fixed-step master (Jacobi or Gauss-Seidel)."""
+
+    MO = ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")
+    BO = ("F_x", "F_y", "stiffness_xx", "stiffness_xy", "stiffness_yy", "damping_xx", "damping_xy", "damping_yy")
+
+    def __init__(self, mech_fmu, bearing_fmu, mech_ints=None):
+        self.dirs = []
+        self.mech, self.mv = self._instantiate(mech_fmu, "mechanism", mech_ints or {})
+        self.bear, self.bv = self._instantiate(bearing_fmu, "bearing", {})
+        self.step = 0
+
+    def _instantiate(self, path, name, ints):
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+        md = read_model_description(str(path))
+        d = extract(str(path))
+        self.dirs.append(d)
+        f = FMU2Slave(guid=md.guid, unzipDirectory=d, modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName=name)
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        f.instantiate()
+        f.setupExperiment(startTime=0.0)
+        f.enterInitializationMode()
+        for k, value in ints.items():
+            f.setInteger([vr[k]], [value])
+        f.exitInitializationMode()
+        return f, vr
+
+    def run(self, n, h=H, gauss_seidel=False, record=("slider_x", "e_x", "e_y")):
+        mech, bear, mv, bv = self.mech, self.bear, self.mv, self.bv
+        u_m = mech.getReal([mv[x] for x in self.MO])
+        u_b = bear.getReal([bv[x] for x in self.BO])
+        out = []
+        for _ in range(n):
+            t = self.step * h
+            self.step += 1
+            mech.setReal([mv[x] for x in self.BO], u_b)
+            mech.doStep(t, h)
+            if gauss_seidel:
+                u_m = mech.getReal([mv[x] for x in self.MO])
+            bear.setReal([bv[x] for x in self.MO], u_m)
+            bear.doStep(t, h)
+            u_m = mech.getReal([mv[x] for x in self.MO])
+            u_b = bear.getReal([bv[x] for x in self.BO])
+            out.append(mech.getReal([mv[x] for x in record]) + list(u_b[:2]))
+        return np.array(out)
+
+    def close(self):
+        for f in (self.mech, self.bear):
+            f.terminate()
+            f.freeInstance()
+        for d in self.dirs:
+            shutil.rmtree(d, ignore_errors=True)
+
+
+def test_slider_crank_fmu_with_gauss_seidel_ordering_reproduces_our_master(ssp_archive):
+    """force_lag_steps = 0 and a Gauss-Seidel loop: the two-FMU system is our master's jacobian-drift
+    co-simulation, to rounding (the same core, the same BallBearing FMU)."""
+    from mechanism.run import run
+    config, system = ssp_run.config_from_ssp(ssp_archive, revs=T_SHORT * 20.0, progress=False)  # 0.04 rev = 2 ms
+    try:
+        ref = run(config)
+        pair = _Pair(system.components["mechanism"].fmu, system.components["bearing"].fmu, {"force_lag_steps": 0})
+        try:
+            got = pair.run(len(ref["time"]) - 1, gauss_seidel=True)
+        finally:
+            pair.close()
+    finally:
+        system.close()
+    assert ref.ok
+    for col, key in ((0, "slider_x"), (1, "e_x"), (2, "e_y"), (3, "F_x"), (4, "F_y")):
+        scale = np.max(np.abs(ref[key]))
+        assert np.max(np.abs(got[:, col] - ref[key][1:])) <= 1e-9 * scale, key
+
+
+def test_slider_crank_fmu_state_round_trip(ssp_archive):
+    with sm.load_ssp(ssp_archive) as system:
+        pair = _Pair(system.components["mechanism"].fmu, system.components["bearing"].fmu)
+        try:
+            pair.run(50)
+            mech_state, bear_state = pair.mech.getFMUstate(), pair.bear.getFMUstate()
+            serialized = pair.mech.serializeFMUstate(mech_state)
+            first = pair.run(30)
+            pair.step -= 30
+            pair.mech.setFMUstate(pair.mech.deSerializeFMUstate(serialized))
+            pair.bear.setFMUstate(bear_state)
+            again = pair.run(30)
+        finally:
+            pair.close()
+    assert np.array_equal(first, again)
+
+
+def test_two_fmu_jacobi_is_stable_at_1e_5_with_the_tangent_inputs_and_not_without(ssp_archive, tmp_path):
+    """fmpy.ssp (fixed-step Jacobi) at h = 1e-5 s, 0.2 rev at 1200 rpm: stable with the stiffness and
+    damping connections; without them (zero-order hold) the eccentricity diverges within ~150 steps."""
+    result = ssp_run.simulate_with("fmpy", ssp_archive, step=H, t_end=0.01)
+    e = np.hypot(result["mechanism.e_x"], result["mechanism.e_y"])
+    assert np.all(np.isfinite(e)) and 20e-6 < e.max() < 45e-6      # monolithic reference: 30.6 µm
+    tangent = ("stiffness_xx", "stiffness_xy", "stiffness_yy", "damping_xx", "damping_xy", "damping_yy")
+
+    def zoh(text):
+        for name in tangent:
+            text = re.sub(rf'\s*<ssd:Connection startElement="bearing" startConnector="{name}"[^>]*/>', "", text)
+            text = re.sub(rf'\s*<ssd:Connector name="{name}" kind="input">\s*<ssc:Real unit="[^"]*" />\s*'
+                          rf'</ssd:Connector>', "", text)
+        return text
+
+    held = _edit(ssp_archive, tmp_path, SSD, edit=zoh)
+    from fmpy.ssp.simulation import simulate_ssp
+    from fmpy.ssp.ssd import Parameter, ParameterSet
+    pset = ParameterSet(name="zoh", parameters=[Parameter(name="mechanism.force_drift", value=False)])
+    with pytest.raises(Exception, match="fmi2DoStep"):
+        simulate_ssp(str(held), stop_time=0.01, step_size=H, parameter_set=pset)
+
+
+def test_ssp_cli_generate_check_and_pack(ssp_archive, tmp_path, capsys):
+    from mechanism.cli import main
+    assert main(["ssp-generate", "--check"]) == 0
+    fmu_dir = tmp_path / "fmus"
+    fmu_dir.mkdir()
+    with sm.load_ssp(ssp_archive) as system:
+        for c in system.components.values():
+            shutil.copy(c.fmu, fmu_dir / f"{c.model_name}.fmu")
+    out = tmp_path / "out.ssp"
+    assert main(["ssp-pack", "--no-build", "--fmu-dir", str(fmu_dir), "--out", str(out)]) == 0
+    assert out.is_file() and "packed" in capsys.readouterr().out
+    (fmu_dir / "SliderCrank.fmu").unlink()
+    assert main(["ssp-pack", "--no-build", "--fmu-dir", str(fmu_dir), "--out", str(out)]) == 2
+    assert "not built" in capsys.readouterr().err
+    assert math.isfinite(out.stat().st_size)
