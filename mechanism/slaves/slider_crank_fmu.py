@@ -46,6 +46,7 @@ from pythonfmu import (Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, F
                        Integer, Real)
 from pythonfmu.enums import Fmi2Status
 
+from fmu_bearing.slaves import guard_pythonfmu_exit, hold_before_raise
 from mechanism.bearing_joint import BearingLink
 from mechanism.coupling import Exchanged, InterfaceJacobian, InterfaceJacobianDrift
 from mechanism.integrators import rk4_step
@@ -134,10 +135,6 @@ SETTINGS = (
     ("max_substeps", "Integer", int(_SETTINGS.max_substeps), 1, None, None, "largest number of RK4 substeps per step"),
 )
 
-#: pythonfmu 0.7 mishandles reference counts when a Python exception reaches its C++ side (see the
-#: BallBearing slave): before the only exception raised on purpose (a failed initialisation) the
-#: slave parks one extra reference to its class, itself and its log queue here.
-_PYTHONFMU_EXCEPTION_REFS = []
 
 
 class _TypeAttributes:
@@ -175,6 +172,7 @@ class SliderCrank(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        guard_pythonfmu_exit(self.resources)     # pythonfmu 0.7's exit-time double free (fmu_bearing/slaves)
         self._system = None          # System, BearingLink, ... built at exit of initialisation
         self._pending_error = None   # a refused call, reported by the next doStep
         self._y = None               # mechanism state [q, qd]
@@ -236,7 +234,7 @@ class SliderCrank(Fmi2Slave):
         except Exception as err:
             self._system = None
             self._error(f"initialisation failed: {err}")
-            _PYTHONFMU_EXCEPTION_REFS.append((type(self), self, self.log_queue))
+            hold_before_raise(self)  # pythonfmu 0.7 over-releases objects on the exception path
             raise  # -> fmi2ExitInitializationMode returns an error status
 
     def _setup(self):

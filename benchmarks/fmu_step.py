@@ -1,0 +1,189 @@
+"""Cost of one co-simulation exchange with the BallBearing FMU against the in-process force law.
+
+    python benchmarks/fmu_step.py [--fmu dist/BallBearing.fmu] [--calls 3000] [--repeat 7]
+
+Targets on the development machine: in-process evaluate <= 10 us for 8 balls, exchange <= 25 us.
+
+One exchange = setReal of the 6 inputs in one call, doStep, getReal of F_x and F_y in one call,
+through fmpy's FMU2Slave. Measured three ways: fmpy's convenience methods (which build ctypes arrays
+per call), fmpy's fmi2* wrappers with prebuilt ctypes arrays (what the master does), and the raw
+ctypes function pointers (no fmpy wrapper). The breakdown times each call alone and the slave's own
+Python code called directly, so the rest is pythonfmu's C++ layer plus ctypes. Every figure is the
+median over ``--repeat`` runs of ``--calls`` calls, in microseconds per call.
+"""
+from __future__ import annotations
+
+import argparse
+import ctypes
+import math
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from fmu_bearing.ball_bearing import BallBearing  # noqa: E402
+from fmu_bearing.parameters import BearingParameters  # noqa: E402
+
+INPUTS = ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")
+TARGET_IN_PROCESS_US, TARGET_EXCHANGE_US = 10.0, 25.0
+
+
+def states(n=64):
+    """Representative loaded inputs: |e| = 30 um (3 of 8 balls loaded) turning, small v, 100 rad/s."""
+    out = []
+    for k in range(n):
+        a = 2 * math.pi * k / n
+        out.append((3e-5 * math.cos(a), 3e-5 * math.sin(a), -0.01 * math.sin(a), 0.01 * math.cos(a), 100.0, 0.0))
+    return out
+
+
+def medians_us(benchmarks: dict, calls: int, repeat: int) -> dict:
+    """Median time per call [us] of each ``fn(calls)``; the repeats are interleaved (round robin) so
+    that a change of load on the (shared) machine affects every benchmark alike."""
+    runs = {name: [] for name in benchmarks}
+    for _ in range(repeat):
+        for name, fn in benchmarks.items():
+            t0 = time.perf_counter()
+            fn(calls)
+            runs[name].append((time.perf_counter() - t0) / calls * 1e6)
+    return {name: statistics.median(times) for name, times in runs.items()}
+
+
+def find_fmu(path: str | None, tmp: Path) -> Path:
+    """The FMU to measure: ``path``, or a fresh build of the current sources (never a stale dist/)."""
+    if path:
+        return Path(path)
+    import build_fmu
+    return build_fmu.build(tmp, names=["BallBearing"], verbose=False)["BallBearing"]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--fmu", help="FMU to measure (default: a fresh build of the current sources)")
+    parser.add_argument("--calls", type=int, default=3000)
+    parser.add_argument("--repeat", type=int, default=7)
+    args = parser.parse_args(argv)
+
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    with tempfile.TemporaryDirectory() as tmp:
+        fmu_path = find_fmu(args.fmu, Path(tmp))
+        md = read_model_description(str(fmu_path))
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        unzipdir = extract(str(fmu_path), unzipdir=str(Path(tmp) / "x"))
+        fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName="bench")
+        fmu.instantiate(loggingOn=False)
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+
+        S = states()
+        nS = len(S)
+        in_vrs = [vr[n] for n in INPUTS]
+        out_vrs = [vr["F_x"], vr["F_y"]]
+        h = 1e-5
+        comp = fmu.component
+        vr_in = (ctypes.c_uint * 6)(*in_vrs)
+        val_in = (ctypes.c_double * 6)()
+        vr_out = (ctypes.c_uint * 2)(*out_vrs)
+        val_out = (ctypes.c_double * 2)()
+        set_real, do_step, get_real = fmu.fmi2SetReal, fmu.fmi2DoStep, fmu.fmi2GetReal
+        raw_set, raw_step, raw_get = (fmu.dll.fmi2SetReal, fmu.dll.fmi2DoStep, fmu.dll.fmi2GetReal)
+        raw_set.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint), ctypes.c_size_t,
+                            ctypes.POINTER(ctypes.c_double)]
+        raw_get.argtypes = raw_set.argtypes
+        raw_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
+        raw_set.restype = raw_step.restype = raw_get.restype = ctypes.c_int
+
+        def fmpy_convenience(n):
+            for i in range(n):
+                fmu.setReal(in_vrs, S[i % nS])
+                fmu.doStep(i * h, h)
+                fmu.getReal(out_vrs)
+
+        def fmpy_prebuilt(n):
+            for i in range(n):
+                val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
+                set_real(comp, vr_in, 6, val_in)
+                do_step(comp, i * h, h, 1)
+                get_real(comp, vr_out, 2, val_out)
+                val_out[0], val_out[1]
+
+        def raw_ctypes(n):
+            for i in range(n):
+                val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
+                if raw_set(comp, vr_in, 6, val_in) or raw_step(comp, i * h, h, 1) or raw_get(comp, vr_out, 2, val_out):
+                    raise RuntimeError("FMI call failed")
+                val_out[0], val_out[1]
+
+        def only_set(n):
+            for i in range(n):
+                val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
+                set_real(comp, vr_in, 6, val_in)
+
+        def only_step(n):
+            for i in range(n):
+                do_step(comp, i * h, h, 1)
+
+        def only_get(n):
+            for i in range(n):
+                get_real(comp, vr_out, 2, val_out)
+
+        # The slave's own Python code, called directly (no pythonfmu C++, no ctypes).
+        from fmu_bearing.slaves.ball_bearing_fmu import BallBearing as Slave
+        slave = Slave(instance_name="direct", resources=None)
+        slave.exit_initialization_mode()
+
+        def slave_direct(n):
+            for i in range(n):
+                slave.set_real(in_vrs, list(S[i % nS]))
+                slave.do_step(i * h, h)
+                slave.get_real(out_vrs)
+
+        def in_process(n_balls):
+            b = BallBearing(BearingParameters(n_balls=n_balls, allow_ball_overlap=n_balls > 13))
+            loads = [0.0] * n_balls
+
+            def evaluate(n):
+                ev = b.evaluate
+                for i in range(n):
+                    ex, ey, vx, vy, wi, wo = S[i % nS]
+                    ev(ex, ey, vx, vy, 0.1 * i, wi, wo, loads)
+            return evaluate
+
+        c, r = args.calls, args.repeat
+        results = medians_us({
+            "exchange, fmpy setReal/doStep/getReal": fmpy_convenience,
+            "exchange, fmpy fmi2* with prebuilt ctypes arrays": fmpy_prebuilt,
+            "exchange, raw ctypes function pointers": raw_ctypes,
+            "  of which fmi2SetReal (6 values)": only_set,
+            "  of which fmi2DoStep": only_step,
+            "  of which fmi2GetReal (2 values)": only_get,
+            "  slave Python code alone (set_real, do_step, get_real)": slave_direct,
+            "in-process evaluate, 8 balls": in_process(8),
+            "in-process evaluate, 20 balls": in_process(20),
+        }, c, r)
+        fmu.terminate()
+        fmu.freeInstance()
+
+    width = max(map(len, results))
+    print(f"BallBearing FMU exchange vs in-process force law ({fmu_path.name}; median of {r} x {c} calls)")
+    for name, us in results.items():
+        print(f"  {name:<{width}}  {us:8.2f} us")
+    exchange = results["exchange, fmpy fmi2* with prebuilt ctypes arrays"]
+    in_process = results["in-process evaluate, 8 balls"]
+    print(f"  ratio exchange (prebuilt arrays) / in-process evaluate (8 balls): {exchange / in_process:.1f}")
+    print(f"  targets: in-process <= {TARGET_IN_PROCESS_US:g} us for 8 balls "
+          f"({'met' if in_process <= TARGET_IN_PROCESS_US else 'MISSED'}), exchange <= {TARGET_EXCHANGE_US:g} us "
+          f"({'met' if exchange <= TARGET_EXCHANGE_US else 'MISSED'})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,188 @@
+"""Build the project's FMUs with pythonfmu: ``python build_fmu.py [--max-balls N] [--out dist]``.
+
+Each FMU in ``REGISTRY`` is built from its slave script with the packages it needs (``fmu_bearing``,
+and for the SliderCrank FMU also ``mechanism``) packed into the FMU's resources, so the FMU runs in
+any Python host that has numpy and scipy, without this project installed. Build options (the per-ball output capacity) are written to
+``resources/build_options.json`` inside the FMU, where the slave reads them at instantiation.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import shutil
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+from typing import NamedTuple
+from xml.etree import ElementTree
+
+ROOT = Path(__file__).resolve().parent
+try:
+    import fmu_bearing  # the slave scripts import it at build time
+except ImportError:  # running from a source tree that is not installed
+    sys.path.insert(0, str(ROOT))
+    import fmu_bearing
+
+PACKAGE = Path(fmu_bearing.__file__).resolve().parent
+SLAVES = PACKAGE / "slaves"
+DOC = ROOT / "docs" / "fmu-interface.md"
+DEFAULT_MAX_BALLS = 20
+BUILD_OPTIONS_FILE = "build_options.json"
+#: FMI capability flags of our FMUs (pythonfmu's get/set and serialize state are implemented)
+STATE_OPTIONS = {"canGetAndSetFMUstate": True, "canSerializeFMUstate": True}
+
+
+class FmuSpec(NamedTuple):
+    """One FMU to build: its slave script, its model name, and the options of the build."""
+
+    script: Path
+    name: str
+    options: dict  # FMI capability flags for FmuBuilder.build_FMU
+    packages: tuple[str, ...] = ("fmu_bearing",)  # packed into resources/ so the FMU runs stand-alone
+
+
+REGISTRY: list[FmuSpec] = [
+    FmuSpec(SLAVES / "ball_bearing_fmu.py", "BallBearing", dict(STATE_OPTIONS)),
+    FmuSpec(SLAVES / "journal_clearance_fmu.py", "JournalClearance", dict(STATE_OPTIONS)),
+    FmuSpec(ROOT / "mechanism" / "slaves" / "slider_crank_fmu.py", "SliderCrank", dict(STATE_OPTIONS),
+            ("fmu_bearing", "mechanism")),
+]
+
+
+def package_dir(name: str) -> Path:
+    """Folder of the top-level package ``name`` (found without importing it)."""
+    spec = importlib.util.find_spec(name)
+    if spec is None or not spec.submodule_search_locations:
+        raise RuntimeError(f"package {name!r} not found")
+    return Path(next(iter(spec.submodule_search_locations))).resolve()
+
+
+def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
+          names: list[str] | tuple[str, ...] | None = None, verbose: bool = True) -> dict[str, Path]:
+    """Build the FMUs of ``REGISTRY`` (or only ``names``) into ``out_dir``; return {model name: path}.
+
+    An entry whose slave script does not exist yet is skipped with a message.
+    """
+    from pythonfmu import FmuBuilder
+
+    if int(max_balls) != max_balls or max_balls < 3:
+        raise ValueError(f"max_balls = {max_balls!r} must be an integer >= 3")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    unknown = set(names or ()) - {spec.name for spec in REGISTRY}
+    if unknown:
+        raise ValueError(f"unknown FMU(s) {sorted(unknown)}; known: {[spec.name for spec in REGISTRY]}")
+    built: dict[str, Path] = {}
+    for spec in REGISTRY:
+        if names is not None and spec.name not in names:
+            continue
+        if not spec.script.is_file():
+            if verbose:
+                print(f"skipping {spec.name}: {spec.script} does not exist yet")
+            continue
+        saved_path = list(sys.path)
+        with tempfile.TemporaryDirectory(prefix=f"build_{spec.name}_") as tmp:
+            stage = Path(tmp)
+            # Clean copies of the packages (no caches) and the build options, packed as project files.
+            project_files = []
+            for package in spec.packages:
+                shutil.copytree(package_dir(package), stage / package,
+                                ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo", "*.fmu"))
+                project_files.append(stage / package)
+            options_file = stage / BUILD_OPTIONS_FILE
+            options_file.write_text(json.dumps({"max_balls": int(max_balls)}) + "\n", encoding="utf-8")
+            doc_dir = None
+            if DOC.is_file():
+                doc_dir = stage / "documentation"
+                doc_dir.mkdir()
+                shutil.copy2(DOC, doc_dir / DOC.name)
+            # Build into the staging folder, then move: readers of out_dir never see a half-written FMU.
+            try:
+                fmu = FmuBuilder.build_FMU(spec.script, dest=stage / f"{spec.name}.fmu",
+                                           project_files=[*project_files, options_file],
+                                           documentation_folder=doc_dir, **spec.options)
+            finally:
+                sys.path[:] = saved_path  # pythonfmu leaves the script's folder on sys.path
+            model_name = _model_name(fmu)
+            if model_name != spec.name:
+                raise RuntimeError(f"{spec.script} defines model {model_name!r}, expected {spec.name!r}")
+            target = out / f"{spec.name}.fmu"
+            tmp_target = out / f".{spec.name}.fmu.{os.getpid()}.tmp"
+            shutil.copyfile(fmu, tmp_target)
+            os.replace(tmp_target, target)
+        built[spec.name] = target
+        if verbose:
+            print(f"built {target} ({target.stat().st_size / 1024:.0f} kB, model {spec.name}"
+                  + (f", per-ball outputs for up to {max_balls} balls)" if spec.name == "BallBearing" else ")"))
+    return built
+
+
+#: packages the SliderCrank FMU carries as project files (its slave imports the multibody core)
+SLIDER_CRANK_PACKAGES = ("mechanism",)
+SLIDER_CRANK_DOC = ROOT / "docs" / "ssp.md"
+
+
+def build_slider_crank(out_dir: str | Path = "dist", verbose: bool = True) -> Path:
+    """Build dist/SliderCrank.fmu from mechanism/slaves/slider_crank_fmu.py with the ``mechanism``
+    package packed as project files (so it runs in any Python host with numpy, scipy and tqdm)."""
+    from pythonfmu import FmuBuilder
+
+    spec = next(s for s in REGISTRY if s.name == "SliderCrank")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    saved_path = list(sys.path)
+    with tempfile.TemporaryDirectory(prefix="build_SliderCrank_") as tmp:
+        stage = Path(tmp)
+        for package in SLIDER_CRANK_PACKAGES:
+            shutil.copytree(ROOT / package, stage / package,
+                            ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo", "*.fmu"))
+        doc_dir = None
+        if SLIDER_CRANK_DOC.is_file():
+            doc_dir = stage / "documentation"
+            doc_dir.mkdir()
+            shutil.copy2(SLIDER_CRANK_DOC, doc_dir / SLIDER_CRANK_DOC.name)
+        try:
+            fmu = FmuBuilder.build_FMU(spec.script, dest=stage / f"{spec.name}.fmu",
+                                       project_files=[stage / p for p in SLIDER_CRANK_PACKAGES],
+                                       documentation_folder=doc_dir, **spec.options)
+        finally:
+            sys.path[:] = saved_path  # pythonfmu leaves the script's folder on sys.path
+        if _model_name(fmu) != spec.name:
+            raise RuntimeError(f"{spec.script} defines model {_model_name(fmu)!r}, expected {spec.name!r}")
+        target = out / f"{spec.name}.fmu"
+        tmp_target = out / f".{spec.name}.fmu.{os.getpid()}.tmp"
+        shutil.copyfile(fmu, tmp_target)
+        os.replace(tmp_target, target)
+    if verbose:
+        print(f"built {target} ({target.stat().st_size / 1024:.0f} kB, model {spec.name})")
+    return target
+
+
+def _model_name(fmu: Path) -> str:
+    with zipfile.ZipFile(fmu) as z:
+        return ElementTree.fromstring(z.read("modelDescription.xml")).get("modelName")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--max-balls", type=int, default=DEFAULT_MAX_BALLS,
+                        help=f"per-ball output capacity of the BallBearing FMU (default {DEFAULT_MAX_BALLS}); "
+                             "n_balls may not exceed it")
+    parser.add_argument("--out", default="dist", help="output folder (default: dist)")
+    parser.add_argument("--only", action="append", choices=[spec.name for spec in REGISTRY],
+                        help="build only this FMU (repeatable)")
+    args = parser.parse_args(argv)
+    if args.max_balls < 3:
+        parser.error("--max-balls must be at least 3")
+    built = build(args.out, args.max_balls, names=args.only)
+    if not built:
+        print("nothing built")
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,66 @@
+"""Thin pythonfmu ``Fmi2Slave`` classes that map FMU variables onto the physics, and their shared helpers.
+
+* ``ball_bearing_fmu``: the ``BallBearing`` co-simulation FMU (force law of Xu et al. 2012);
+* ``journal_clearance_fmu``: the ``JournalClearance`` FMU (journal in a bushing, for Fig. 23-25).
+
+The slave scripts import ``pythonfmu``; ``fmu_bearing`` itself never imports this package, so the physics
+stays usable without it. Build the FMUs with ``python build_fmu.py`` (see docs/fmu-interface.md).
+
+This module holds two workarounds for pythonfmu 0.7's C++ layer that every slave should use (only the
+standard library is imported here):
+
+* ``hold_before_raise(slave)``: call it right before an exception leaves a slave callback (e.g. to fail
+  ``exit_initialization_mode``). When an exception reaches pythonfmu's C++ side, it releases its references
+  to the slave class, the slave instance and its log queue once in its error handler and once more in the
+  instance's destructor; after a few such exceptions in one process those objects are freed while still in
+  use and the host crashes. Parking one extra reference to each balances that (at worst, if pythonfmu is
+  fixed, a small leak per failure). Better still, never let an exception escape where a status can be
+  returned instead (``do_step`` returning False gives fmi2Discard).
+* ``guard_pythonfmu_exit(resources)``: call it from the slave's ``__init__``. At process exit the binary's
+  C++ static destructors delete its Python-state object and then the library destructor,
+  ``finalizePythonInterpreter``, deletes it again: a double free that corrupts the heap after the host has
+  finished ("corrupted double-linked list", SIGABRT, at random; Linux). Calling the exported
+  ``finalizePythonInterpreter`` once from a Python ``atexit`` hook releases the object early and turns both
+  later calls into no-ops.
+"""
+import atexit
+import ctypes
+import glob
+import os
+import sys
+import threading
+
+#: extra references that balance pythonfmu 0.7's over-release on the exception path (see above)
+PYTHONFMU_EXCEPTION_REFS = []
+
+#: FMU binaries whose exit-time double free is already guarded
+_EXIT_GUARDED = set()
+
+
+def hold_before_raise(slave) -> None:
+    """Keep the slave's class, the slave and its log queue alive across pythonfmu's exception path."""
+    PYTHONFMU_EXCEPTION_REFS.append((type(slave), slave, getattr(slave, "log_queue", None)))
+
+
+def guard_pythonfmu_exit(resources) -> None:
+    """Release pythonfmu's Python-state object from an ``atexit`` hook (once per FMU binary).
+
+    Only in a Python host whose main thread drives the FMU: Python then belongs to the host, and the
+    pythonfmu worker thread that ``finalizePythonInterpreter`` joins has already returned. In native hosts
+    and on foreign threads (where Python's main thread is pythonfmu's own) nothing is done.
+    """
+    if not sys.platform.startswith("linux") or not resources:
+        return
+    if threading.current_thread() is not threading.main_thread():
+        return
+    binaries = os.path.join(os.path.dirname(os.path.normpath(str(resources))), "binaries", "linux64")
+    for path in glob.glob(os.path.join(binaries, "*.so")):
+        if path in _EXIT_GUARDED:
+            continue
+        _EXIT_GUARDED.add(path)
+        try:
+            finalize = ctypes.CDLL(path).finalizePythonInterpreter  # loaded by the host already: same handle
+        except (OSError, AttributeError):
+            continue
+        finalize.argtypes, finalize.restype = [], None
+        atexit.register(finalize)

@@ -1,0 +1,362 @@
+"""The BallBearing co-simulation FMU: a thin pythonfmu mapping of FMU variables onto ``fmu_bearing``.
+
+All physics lives in ``fmu_bearing.ball_bearing`` (force law, cage kinematics, input checks) and
+``fmu_bearing.parameters`` (parameters, defaults, units, validation); this module only declares the
+FMI variables and calls those functions. The interface is documented in docs/fmu-interface.md.
+
+Step semantics: ``do_step(t, h)`` checks the inputs, advances the cage angle over [t, t + h] with the
+inputs held, and evaluates the force law at the new cage angle, so every output describes the END of
+the step. On an error the message goes to the FMI logger (status error) and the step returns False
+(pythonfmu 0.7: fmi2Discard), leaving the outputs of the last good step untouched (never NaN); invalid
+parameters fail fmi2ExitInitializationMode (pythonfmu 0.7: fmi2Fatal, the only non-OK status it gives
+that call).
+
+The per-ball output capacity is a build option (``python build_fmu.py --max-balls N``), read at
+instantiation from ``resources/build_options.json``; ``n_balls`` is a parameter up to that capacity.
+
+This file is the FMU's slave module: pythonfmu's binary imports it as a top-level module and finds
+the slave class by matching its source lines against a class statement deriving from Fmi2Slave, so
+it uses absolute imports only and no ``from __future__`` import.
+"""
+import json
+import math
+import os
+from dataclasses import fields
+from functools import partial
+from xml.etree.ElementTree import Element, SubElement
+
+from pythonfmu import (Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability,
+                       Integer, Real)
+from pythonfmu.enums import Fmi2Status
+
+from fmu_bearing import ball_bearing as physics
+from fmu_bearing.parameters import BearingParameters
+from fmu_bearing.slaves import guard_pythonfmu_exit, hold_before_raise
+
+#: per-ball outputs when the FMU was built without an explicit --max-balls
+DEFAULT_CAPACITY = 20
+#: build options written into the FMU's resources folder by build_fmu.py
+BUILD_OPTIONS_FILE = "build_options.json"
+
+#: SI base-unit exponents of each declared unit; None: no integer-exponent form (m^-0.5), name only.
+UNIT_DEFINITIONS = {
+    "1": {},
+    "m": {"m": 1},
+    "m/s": {"m": 1, "s": -1},
+    "rad": {"rad": 1},
+    "rad/s": {"rad": 1, "s": -1},
+    "N": {"kg": 1, "m": 1, "s": -2},
+    "N/m": {"kg": 1, "s": -2},
+    "N.s/m": {"kg": 1, "s": -1},
+    "Pa": {"kg": 1, "m": -1, "s": -2},
+    "Pa.s": {"kg": 1, "m": -1, "s": -1},
+    "1/Pa": {"kg": -1, "m": 1, "s": 2},
+    "N/m1.5": None,
+}
+
+#: (name, unit, description) of the inputs, in value-reference order
+INPUTS = (
+    ("e_x", "m", "eccentricity x: journal (inner ring) centre minus housing (outer ring) centre, global frame"),
+    ("e_y", "m", "eccentricity y: journal (inner ring) centre minus housing (outer ring) centre, global frame"),
+    ("v_x", "m/s", "time derivative of e_x (journal minus housing velocity, x)"),
+    ("v_y", "m/s", "time derivative of e_y (journal minus housing velocity, y)"),
+    ("omega_inner", "rad/s", "absolute angular velocity of the journal body (inner ring)"),
+    ("omega_outer", "rad/s", "absolute angular velocity of the housing body (outer ring)"),
+)
+
+#: outputs in the order of physics.BearingForce, (name, unit, description); unit None: Integer
+FORCE_OUTPUTS = (
+    ("F_x", "N", "bearing force on the housing body, x (the journal body receives -F_x), end of step"),
+    ("F_y", "N", "bearing force on the housing body, y (the journal body receives -F_y), end of step"),
+    ("stiffness_xx", "N/m", "tangent stiffness dF_x/de_x"),
+    ("stiffness_xy", "N/m", "tangent stiffness dF_x/de_y = dF_y/de_x"),
+    ("stiffness_yy", "N/m", "tangent stiffness dF_y/de_y"),
+    ("damping_xx", "N.s/m", "tangent damping dF_x/dv_x"),
+    ("damping_xy", "N.s/m", "tangent damping dF_x/dv_y = dF_y/dv_x"),
+    ("damping_yy", "N.s/m", "tangent damping dF_y/dv_y"),
+    ("loaded_balls", None, "number of balls carrying load"),
+    ("max_ball_load", "N", "largest ball load"),
+)
+assert len(FORCE_OUTPUTS) == len(physics.BearingForce._fields), "FORCE_OUTPUTS out of step with BearingForce"
+
+#: value references of the inputs (registered first, in INPUTS order)
+_INPUT_VRS = list(range(len(INPUTS)))
+
+CAGE_ANGLE = ("cage_angle", "rad",
+              "angle of ball 1 (ball r at cage_angle + 2 pi (r-1)/n_balls), time integral of the cage speed (eq. 16)")
+
+#: Integer parameters: (min, max); max None = the FMU's per-ball capacity
+_INTEGER_RANGES = {"n_balls": (3, None), "damping_model": (0, 2)}
+
+
+def read_capacity(resources) -> int:
+    """Per-ball output capacity from the FMU's resources/build_options.json (DEFAULT_CAPACITY without one)."""
+    if resources:
+        path = os.path.join(str(resources), BUILD_OPTIONS_FILE)
+        if os.path.isfile(path):
+            with open(path, encoding="utf-8") as fh:
+                capacity = int(json.load(fh).get("max_balls", DEFAULT_CAPACITY))
+            return max(capacity, 3)
+    return DEFAULT_CAPACITY
+
+
+class _TypeAttributes:
+    """Mixin: extra attributes (unit, min, max) on the <Real>/<Integer> element, which pythonfmu 0.7 omits."""
+
+    def __init__(self, name, type_attributes=None, **kwargs):
+        super().__init__(name, **kwargs)
+        self.type_attributes = {k: str(v) for k, v in (type_attributes or {}).items() if v is not None}
+
+    def to_xml(self):
+        node = super().to_xml()
+        node[0].attrib.update(self.type_attributes)
+        return node
+
+
+class RealVariable(_TypeAttributes, Real):
+    pass
+
+
+class IntegerVariable(_TypeAttributes, Integer):
+    pass
+
+
+class BooleanVariable(_TypeAttributes, Boolean):
+    pass
+
+
+#: key of the state returned for bytes that are not a serialized state (no exception may escape)
+_INVALID_STATE = "__invalid_state__"
+
+
+class BallBearing(Fmi2Slave):
+    author = "bearing-cosim contributors"
+    description = ("Deep-groove ball bearing with radial clearance (Xu et al., Mech. Mach. Theory 56, 2012): "
+                   "force on the housing from the journal eccentricity, per-ball Hertz contact with damping")
+    version = "0.1.0"
+    license = "MIT"
+    default_experiment = DefaultExperiment(start_time=0.0, stop_time=0.1, step_size=1e-5)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        guard_pythonfmu_exit(self.resources)
+        self.capacity = read_capacity(self.resources)
+        self._bearing = None                       # physics.BallBearing, built at exit of initialisation
+        self._pending_error = None                 # a refused call, reported by the next doStep
+        self._loads = [0.0] * self.capacity        # ball_load_k outputs (fixed list object: getters bind to it)
+        self._scratch = [0.0] * self.capacity      # evaluate() writes here; copied to _loads on success
+        self._param_names = tuple(f.name for f in fields(BearingParameters))
+
+        cont, fixed, discrete = Fmi2Variability.continuous, Fmi2Variability.fixed, Fmi2Variability.discrete
+        output, exact = Fmi2Causality.output, Fmi2Initial.exact
+        for name, unit, desc in INPUTS:
+            self._register(RealVariable, name, 0.0, desc, {"unit": unit},
+                           causality=Fmi2Causality.input, variability=cont)
+        for name, unit, desc in FORCE_OUTPUTS:
+            if unit is None:
+                self._register(IntegerVariable, name, 0, desc, None,
+                               causality=output, variability=discrete, initial=exact)
+            else:
+                self._register(RealVariable, name, 0.0, desc, {"unit": unit},
+                               causality=output, variability=cont, initial=exact)
+        name, unit, desc = CAGE_ANGLE
+        self._register(RealVariable, name, float(BearingParameters().cage_angle_start), desc, {"unit": unit},
+                       causality=output, variability=cont, initial=exact)
+        # Parameters: one per BearingParameters field, with its default, unit and description;
+        # the FMI type follows the default's Python type (bool -> Boolean, int -> Integer, else Real).
+        for f in fields(BearingParameters):
+            desc = f.metadata.get("description", f.name)
+            kwargs = dict(causality=Fmi2Causality.parameter, variability=fixed, initial=exact)
+            if isinstance(f.default, bool):
+                self._register(BooleanVariable, f.name, bool(f.default), desc, None, **kwargs)
+            elif isinstance(f.default, int):
+                lo, hi = _INTEGER_RANGES.get(f.name, (None, None))
+                if f.name in _INTEGER_RANGES and hi is None:
+                    hi = self.capacity
+                self._register(IntegerVariable, f.name, int(f.default), desc, {"min": lo, "max": hi}, **kwargs)
+            else:
+                self._register(RealVariable, f.name, float(f.default), desc,
+                               {"unit": f.metadata.get("unit") or None}, **kwargs)
+        # Per-ball loads last, so every other value reference is the same for any capacity.
+        loads = self._loads
+        for k in range(self.capacity):
+            self.register_variable(RealVariable(
+                f"ball_load_{k + 1}", type_attributes={"unit": "N"},
+                description=f"load on ball {k + 1} (0 outside the load zone, and for balls beyond n_balls)",
+                causality=output, variability=cont, initial=exact,
+                getter=partial(loads.__getitem__, k), setter=partial(loads.__setitem__, k)))
+        assert [self.vars[vr].name for vr in _INPUT_VRS] == [name for name, _, _ in INPUTS]
+        # Value reference -> getter/setter maps for the fast paths. Before initialisation every
+        # variable may be set (FMI 2.0: initial exact/approx); after it, the inputs only.
+        self._real_get = {vr: v.getter for vr, v in self.vars.items() if isinstance(v, Real)}
+        self._real_set = self._setters(Real, None)
+        self._int_set = self._setters(Integer, None)
+        self._bool_set = self._setters(Boolean, None)
+
+    # --- registration helpers (build time and instantiation only) ------------------------------
+    def _register(self, cls, name, start, description, type_attributes, **kwargs):
+        setattr(self, name, start)
+        self.register_variable(cls(name, type_attributes=type_attributes, description=description,
+                                   getter=partial(getattr, self, name), setter=partial(setattr, self, name),
+                                   **kwargs))
+
+    def _setters(self, kind, causalities):
+        return {vr: v.setter for vr, v in self.vars.items()
+                if isinstance(v, kind) and (causalities is None or v.causality in causalities)}
+
+    def to_xml(self, model_options=dict()):
+        """pythonfmu's modelDescription plus <UnitDefinitions> for every unit the variables use."""
+        root = super().to_xml(model_options)
+        used = {v.type_attributes.get("unit") for v in self.vars.values() if isinstance(v, _TypeAttributes)}
+        units = Element("UnitDefinitions")
+        for unit in sorted(u for u in used if u):
+            node = SubElement(units, "Unit", {"name": unit})
+            exponents = UNIT_DEFINITIONS[unit]
+            if exponents is not None:
+                SubElement(node, "BaseUnit", {k: str(v) for k, v in exponents.items()})
+        root.insert(1, units)  # FMI 2.0 order: CoSimulation, UnitDefinitions, ..., LogCategories, ...
+        return root
+
+    # --- FMI ----------------------------------------------------------------------------------
+    # pythonfmu 0.7 maps a Python exception to fmi2Fatal (there is no route to fmi2Error) and mishandles
+    # reference counts on that path (see fmu_bearing.slaves), so the only exception raised here is
+    # the one that fails exitInitializationMode. Everything else logs (status error) and returns: a
+    # refused doStep returns False (fmi2Discard); a refused set/get call is reported by the next doStep.
+    def parameters(self) -> BearingParameters:
+        """The current parameter values as BearingParameters."""
+        return BearingParameters(**{name: getattr(self, name) for name in self._param_names})
+
+    def exit_initialization_mode(self):
+        try:
+            bearing = physics.BallBearing(self.parameters(), self.capacity)  # validates, names the parameter
+            bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer)
+            message = self._evaluate(float(bearing.params.cage_angle_start), bearing)
+            if message is not None:
+                raise FloatingPointError(message)
+        except Exception as err:
+            self._bearing = None
+            self._error(f"initialisation failed: {err}")
+            hold_before_raise(self)  # pythonfmu 0.7 over-releases objects on the exception path
+            raise  # -> fmi2ExitInitializationMode returns fmi2Fatal (pythonfmu 0.7 has no route to fmi2Error)
+        self._bearing = bearing
+        inputs = (Fmi2Causality.input,)
+        self._real_set = self._setters(Real, inputs)   # fixed parameters and outputs are read-only now
+        self._int_set = self._setters(Integer, inputs)
+        self._bool_set = self._setters(Boolean, inputs)
+
+    def do_step(self, current_time, step_size):
+        bearing = self._bearing
+        if bearing is None or self._pending_error is not None:
+            reason = self._pending_error or "the instance is not initialised"
+            self._pending_error = None
+            return self._refuse_step(current_time, reason)
+        w_i, w_o = self.omega_inner, self.omega_outer
+        try:
+            bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, w_i, w_o)
+        except physics.BearingInputError as err:
+            return self._refuse_step(current_time, err)
+        if not step_size >= 0.0:
+            return self._refuse_step(current_time, f"step size {step_size!r} is not >= 0")
+        message = self._evaluate(bearing.advance_cage(self.cage_angle, w_i, w_o, step_size), bearing)
+        if message is not None:
+            return self._refuse_step(current_time, message)
+        return True
+
+    def _refuse_step(self, current_time, reason):
+        self._error(f"doStep at t = {current_time!r} s refused: {reason}")
+        return False  # pythonfmu 0.7: fmi2Discard; the outputs keep the values of the last good step
+
+    def _evaluate(self, cage_angle, bearing):
+        """Outputs at ``cage_angle`` and the held inputs; on failure return a message and change nothing."""
+        try:
+            r = bearing.evaluate(self.e_x, self.e_y, self.v_x, self.v_y, cage_angle,
+                                 self.omega_inner, self.omega_outer, self._scratch)
+        except Exception as err:  # never let an exception reach pythonfmu's C++ side
+            return f"force law failed: {err!r}"
+        if not math.isfinite(r[0] + r[1] + r[2] + r[3] + r[4] + r[5] + r[6] + r[7] + r[9] + cage_angle):
+            return f"non-finite force law result {tuple(r)} (inputs out of any physical range)"
+        (self.F_x, self.F_y, self.stiffness_xx, self.stiffness_xy, self.stiffness_yy,
+         self.damping_xx, self.damping_xy, self.damping_yy, self.loaded_balls, self.max_ball_load) = r
+        self.cage_angle = cage_angle
+        self._loads[:] = self._scratch
+        return None
+
+    def _error(self, message):
+        # The FMI logger's message is a printf format: escape '%'.
+        self.log(str(message).replace("%", "%%"), Fmi2Status.error)
+
+    # --- fast paths: pythonfmu loops over Fmi2Slave.vars with isinstance checks per value --------
+    def get_real(self, vrs):
+        get = self._real_get
+        try:
+            return [get[vr]() for vr in vrs]
+        except KeyError:
+            return [get[vr]() if vr in get else self._refuse(vr, "Real", 0.0) for vr in vrs]
+
+    def set_real(self, vrs, values):
+        if vrs == _INPUT_VRS:  # the master's usual call: all six inputs, in declaration order
+            self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer = values
+            return
+        put = self._real_set
+        try:
+            for vr, value in zip(vrs, values):
+                put[vr](value)
+        except KeyError:
+            for vr, value in zip(vrs, values):
+                put[vr](value) if vr in put else self._refuse(vr, "Real")
+
+    def get_integer(self, vrs):
+        return [int(self.vars[vr].getter()) if isinstance(self.vars.get(vr), Integer)
+                else self._refuse(vr, "Integer", 0) for vr in vrs]
+
+    def set_integer(self, vrs, values):
+        put = self._int_set
+        for vr, value in zip(vrs, values):
+            put[vr](int(value)) if vr in put else self._refuse(vr, "Integer")
+
+    def get_boolean(self, vrs):
+        return [bool(self.vars[vr].getter()) if isinstance(self.vars.get(vr), Boolean)
+                else self._refuse(vr, "Boolean", False) for vr in vrs]
+
+    def set_boolean(self, vrs, values):
+        put = self._bool_set
+        for vr, value in zip(vrs, values):
+            put[vr](bool(value)) if vr in put else self._refuse(vr, "Boolean")
+
+    def _refuse(self, vr, kind, value=None):
+        """Log a refused get/set (no exception, see above); the next doStep reports it. Returns ``value``."""
+        var = self.vars.get(vr)
+        if var is None:
+            msg = f"no variable with valueReference {vr}"
+        elif not isinstance(var, {"Real": Real, "Integer": Integer, "Boolean": Boolean}[kind]):
+            msg = f"{var.name} (valueReference {vr}) is not of type {kind}"
+        elif var.causality == Fmi2Causality.parameter:
+            msg = f"parameter {var.name} is fixed: it cannot be set after initialisation (value ignored)"
+        else:
+            msg = f"{var.name} is an {var.causality.name}: it cannot be set after initialisation (value ignored)"
+        self._error(msg)
+        self._pending_error = self._pending_error or msg
+        return value
+
+    # --- FMU state: pythonfmu saves every registered variable (inputs, outputs incl. cage_angle, parameters)
+    @staticmethod
+    def _fmu_state_from_bytes(state):
+        try:
+            return Fmi2Slave._fmu_state_from_bytes(state)
+        except Exception as err:  # no exception may reach pythonfmu's C++ side
+            return {_INVALID_STATE: f"fmi2DeSerializeFMUstate: not a serialized BallBearing state ({err!r})"}
+
+    def _set_fmu_state(self, state):
+        if _INVALID_STATE in state:
+            self._error(state[_INVALID_STATE])
+            self._pending_error = self._pending_error or state[_INVALID_STATE]
+            return
+        super()._set_fmu_state(state)
+        if self._bearing is not None:
+            try:
+                params = self.parameters()
+                if params != self._bearing.params:  # a state of an instance with other parameters
+                    self._bearing = physics.BallBearing(params, self.capacity)
+            except Exception as err:
+                self._bearing = None
+                self._error(f"setFMUstate: the restored parameters are invalid: {err}")
