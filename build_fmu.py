@@ -42,13 +42,14 @@ class FmuSpec(NamedTuple):
     name: str
     options: dict  # FMI capability flags for FmuBuilder.build_FMU
     packages: tuple[str, ...] = ("fmu_bearing",)  # packed into resources/ so the FMU runs stand-alone
+    doc: Path = DOC  # packed as the FMU's documentation
 
 
 REGISTRY: list[FmuSpec] = [
     FmuSpec(SLAVES / "ball_bearing_fmu.py", "BallBearing", dict(STATE_OPTIONS)),
     FmuSpec(SLAVES / "journal_clearance_fmu.py", "JournalClearance", dict(STATE_OPTIONS)),
     FmuSpec(ROOT / "mechanism" / "slaves" / "slider_crank_fmu.py", "SliderCrank", dict(STATE_OPTIONS),
-            ("fmu_bearing", "mechanism")),
+            ("fmu_bearing", "mechanism"), ROOT / "docs" / "ssp.md"),
 ]
 
 
@@ -95,10 +96,10 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
             options_file = stage / BUILD_OPTIONS_FILE
             options_file.write_text(json.dumps({"max_balls": int(max_balls)}) + "\n", encoding="utf-8")
             doc_dir = None
-            if DOC.is_file():
+            if spec.doc.is_file():
                 doc_dir = stage / "documentation"
                 doc_dir.mkdir()
-                shutil.copy2(DOC, doc_dir / DOC.name)
+                shutil.copy2(spec.doc, doc_dir / spec.doc.name)
             # Build into the staging folder, then move: readers of out_dir never see a half-written FMU.
             try:
                 fmu = FmuBuilder.build_FMU(spec.script, dest=stage / f"{spec.name}.fmu",
@@ -118,47 +119,6 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
             print(f"built {target} ({target.stat().st_size / 1024:.0f} kB, model {spec.name}"
                   + (f", per-ball outputs for up to {max_balls} balls)" if spec.name == "BallBearing" else ")"))
     return built
-
-
-#: packages the SliderCrank FMU carries as project files (its slave imports the multibody core)
-SLIDER_CRANK_PACKAGES = ("mechanism",)
-SLIDER_CRANK_DOC = ROOT / "docs" / "ssp.md"
-
-
-def build_slider_crank(out_dir: str | Path = "dist", verbose: bool = True) -> Path:
-    """Build dist/SliderCrank.fmu from mechanism/slaves/slider_crank_fmu.py with the ``mechanism``
-    package packed as project files (so it runs in any Python host with numpy, scipy and tqdm)."""
-    from pythonfmu import FmuBuilder
-
-    spec = next(s for s in REGISTRY if s.name == "SliderCrank")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    saved_path = list(sys.path)
-    with tempfile.TemporaryDirectory(prefix="build_SliderCrank_") as tmp:
-        stage = Path(tmp)
-        for package in SLIDER_CRANK_PACKAGES:
-            shutil.copytree(ROOT / package, stage / package,
-                            ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo", "*.fmu"))
-        doc_dir = None
-        if SLIDER_CRANK_DOC.is_file():
-            doc_dir = stage / "documentation"
-            doc_dir.mkdir()
-            shutil.copy2(SLIDER_CRANK_DOC, doc_dir / SLIDER_CRANK_DOC.name)
-        try:
-            fmu = FmuBuilder.build_FMU(spec.script, dest=stage / f"{spec.name}.fmu",
-                                       project_files=[stage / p for p in SLIDER_CRANK_PACKAGES],
-                                       documentation_folder=doc_dir, **spec.options)
-        finally:
-            sys.path[:] = saved_path  # pythonfmu leaves the script's folder on sys.path
-        if _model_name(fmu) != spec.name:
-            raise RuntimeError(f"{spec.script} defines model {_model_name(fmu)!r}, expected {spec.name!r}")
-        target = out / f"{spec.name}.fmu"
-        tmp_target = out / f".{spec.name}.fmu.{os.getpid()}.tmp"
-        shutil.copyfile(fmu, tmp_target)
-        os.replace(tmp_target, target)
-    if verbose:
-        print(f"built {target} ({target.stat().st_size / 1024:.0f} kB, model {spec.name})")
-    return target
 
 
 def _model_name(fmu: Path) -> str:

@@ -48,6 +48,20 @@ class BearingForce(NamedTuple):
     max_ball_load: float  # [N]
 
 
+def check_joint_inputs(eccentricity_limit: float, e_x: float, e_y: float, v_x: float, v_y: float,
+                       omega_inner: float = 0.0, omega_outer: float = 0.0) -> None:
+    """The input check every joint component shares: finite inputs, |e| within the divergence limit [m]."""
+    for name, value in (("e_x", e_x), ("e_y", e_y), ("v_x", v_x), ("v_y", v_y),
+                        ("omega_inner", omega_inner), ("omega_outer", omega_outer)):
+        if not math.isfinite(value):
+            raise BearingInputError(f"input {name} = {value!r} is not a finite number")
+    e = math.hypot(e_x, e_y)
+    if e > eccentricity_limit:
+        raise BearingInputError(
+            f"eccentricity |e| = {e:.6g} m exceeds eccentricity_limit = {eccentricity_limit:.6g} m "
+            f"(the calling simulation has diverged)")
+
+
 def cage_angular_velocity(omega_inner: float, omega_outer: float, d_inner: float, d_outer: float) -> float:
     """omega_m = (omega_i d_i + omega_o d_o) / (d_i + d_o), eq. (16) (no gross slip)."""
     return (omega_inner * d_inner + omega_outer * d_outer) / (d_inner + d_outer)
@@ -97,15 +111,7 @@ class BallBearing:
     def check_inputs(self, e_x: float, e_y: float, v_x: float, v_y: float,
                      omega_inner: float = 0.0, omega_outer: float = 0.0) -> None:
         """Raise BearingInputError on non-finite inputs or |e| beyond the divergence limit."""
-        for name, value in (("e_x", e_x), ("e_y", e_y), ("v_x", v_x), ("v_y", v_y),
-                            ("omega_inner", omega_inner), ("omega_outer", omega_outer)):
-            if not math.isfinite(value):
-                raise BearingInputError(f"input {name} = {value!r} is not a finite number")
-        e = math.hypot(e_x, e_y)
-        if e > self.eccentricity_limit:
-            raise BearingInputError(
-                f"eccentricity |e| = {e:.6g} m exceeds eccentricity_limit = {self.eccentricity_limit:.6g} m "
-                f"(the calling simulation has diverged)")
+        check_joint_inputs(self.eccentricity_limit, e_x, e_y, v_x, v_y, omega_inner, omega_outer)
 
     # --- force law ------------------------------------------------------------------------------
     def evaluate(self, e_x: float, e_y: float, v_x: float, v_y: float, cage_angle: float,

@@ -74,7 +74,7 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import NamedTuple
 
-from .ball_bearing import BearingInputError
+from .ball_bearing import BearingInputError, check_joint_inputs
 from .parameters import BearingParameterError, BearingParameters, _param
 
 #: The ball bearing's diametral clearance P_d [m]; this joint's default per-side clearance is P_d / 2.
@@ -259,15 +259,7 @@ class ClearanceJoint:
 
         The ring speeds are unused by this law; they are checked so both joints reject the same inputs.
         """
-        for name, value in (("e_x", e_x), ("e_y", e_y), ("v_x", v_x), ("v_y", v_y),
-                            ("omega_inner", omega_inner), ("omega_outer", omega_outer)):
-            if not math.isfinite(value):
-                raise BearingInputError(f"input {name} = {value!r} is not a finite number")
-        e = math.hypot(e_x, e_y)
-        if e > self.eccentricity_limit:
-            raise BearingInputError(
-                f"eccentricity |e| = {e:.6g} m exceeds eccentricity_limit = {self.eccentricity_limit:.6g} m "
-                f"(the calling simulation has diverged)")
+        check_joint_inputs(self.eccentricity_limit, e_x, e_y, v_x, v_y, omega_inner, omega_outer)
 
     def penetration(self, e_x: float, e_y: float) -> float:
         """delta = |e| - c [m]; positive in contact."""

@@ -243,7 +243,7 @@ def build_fmus(out_dir: str | Path, max_balls: int | None = None, verbose: bool 
     import build_fmu
     kwargs = {} if max_balls is None else {"max_balls": max_balls}
     fmus = dict(build_fmu.build(out_dir, names=["BallBearing"], verbose=verbose, **kwargs))
-    fmus["SliderCrank"] = build_fmu.build_slider_crank(out_dir, verbose=verbose)
+    fmus["SliderCrank"] = build_fmu.build(out_dir, names=["SliderCrank"], verbose=verbose)["SliderCrank"]
     return fmus
 
 

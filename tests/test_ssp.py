@@ -26,7 +26,7 @@ T_SHORT = 0.002       # s: 200 steps, for the quick checks
 
 @pytest.fixture(scope="session")
 def slider_crank_fmu(tmp_path_factory) -> Path:
-    return build_fmu.build_slider_crank(tmp_path_factory.mktemp("fmu_SliderCrank"), verbose=False)
+    return build_fmu.build(tmp_path_factory.mktemp("fmu_SliderCrank"), names=["SliderCrank"], verbose=False)["SliderCrank"]
 
 
 @pytest.fixture(scope="session")

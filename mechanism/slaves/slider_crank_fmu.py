@@ -42,11 +42,12 @@ from functools import partial
 from xml.etree.ElementTree import Element, SubElement
 
 import numpy as np
-from pythonfmu import (Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability,
-                       Integer, Real)
+from pythonfmu import DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
 from pythonfmu.enums import Fmi2Status
 
 from fmu_bearing.slaves import guard_pythonfmu_exit, hold_before_raise
+from fmu_bearing.slaves.ball_bearing_fmu import (BooleanVariable as _Boolean, IntegerVariable as _Integer,
+                                              RealVariable as _Real, _TypeAttributes)
 from mechanism.bearing_joint import BearingLink
 from mechanism.coupling import Exchanged, InterfaceJacobian, InterfaceJacobianDrift
 from mechanism.integrators import rk4_step
@@ -137,29 +138,6 @@ SETTINGS = (
 
 
 
-class _TypeAttributes:
-    """Mixin: extra attributes (unit, min, max) on the <Real>/<Integer> element, which pythonfmu 0.7 omits."""
-
-    def __init__(self, name, type_attributes=None, **kwargs):
-        super().__init__(name, **kwargs)
-        self.type_attributes = {k: str(v) for k, v in (type_attributes or {}).items() if v is not None}
-
-    def to_xml(self):
-        node = super().to_xml()
-        node[0].attrib.update(self.type_attributes)
-        return node
-
-
-class _Real(_TypeAttributes, Real):
-    pass
-
-
-class _Integer(_TypeAttributes, Integer):
-    pass
-
-
-class _Boolean(_TypeAttributes, Boolean):
-    pass
 
 
 class SliderCrank(Fmi2Slave):
