@@ -121,6 +121,32 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
     return built
 
 
+def _sources(spec: FmuSpec) -> list[Path]:
+    """Files an FMU is built from: its packages (incl. the slave scripts), its script, this build script."""
+    files = [spec.script, Path(__file__)]
+    for package in spec.packages:
+        files += package_dir(package).rglob("*.py")
+    return files
+
+
+def is_fresh(fmu: str | Path, spec: FmuSpec | str, max_balls: int = DEFAULT_MAX_BALLS) -> bool:
+    """``fmu`` exists, is newer than every file it is built from, and was built with ``max_balls``."""
+    fmu = Path(fmu)
+    if isinstance(spec, str):
+        spec = next(s for s in REGISTRY if s.name == spec)
+    if not fmu.is_file():
+        return False
+    mtime = fmu.stat().st_mtime
+    if any(src.stat().st_mtime >= mtime for src in _sources(spec) if src.is_file()):
+        return False
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            options = json.loads(z.read(f"resources/{BUILD_OPTIONS_FILE}"))
+    except (KeyError, ValueError, zipfile.BadZipFile):
+        return False
+    return options.get("max_balls") == max_balls
+
+
 def _model_name(fmu: Path) -> str:
     with zipfile.ZipFile(fmu) as z:
         return ElementTree.fromstring(z.read("modelDescription.xml")).get("modelName")

@@ -103,8 +103,9 @@ def summary(r: RunResult) -> dict:
     if len(t) == 0:
         return result
     result["all"] = _figures(r, np.ones_like(t, dtype=bool))
-    if period and t[-1] >= 2 * period - 1e-9:
-        rev2 = (t >= period - 1e-12) & (t <= 2 * period + 1e-12)
+    half = 0.5 * float(r.meta.get("output_interval_s") or 0.0) + 1e-12   # the step count is rounded
+    if period and t[-1] >= 2 * period - half:
+        rev2 = (t >= period - half) & (t <= 2 * period + half)
         result["rev2"] = _figures(r, rev2)
     return result
 

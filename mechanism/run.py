@@ -69,13 +69,15 @@ class RunConfig:
 
 
 def fmu_path(config: RunConfig) -> Path:
-    """The component FMU for the run: ``--fmu`` or dist/<Name>.fmu, built on first use."""
+    """The component FMU for the run: ``--fmu`` as given, else dist/<Name>.fmu, (re)built when it is
+    missing or older than its sources (a stale FMU is never used silently)."""
     if config.fmu:
         return Path(config.fmu)
-    path = Path("dist") / f"{FMU_NAMES[config.joint]}.fmu"
-    if not path.exists():
-        import build_fmu
-        build_fmu.build(Path("dist"))
+    import build_fmu
+    name = FMU_NAMES[config.joint]
+    path = Path("dist") / f"{name}.fmu"
+    if not build_fmu.is_fresh(path, name):
+        build_fmu.build(Path("dist"), names=[name])
     return path
 
 
