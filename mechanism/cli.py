@@ -70,9 +70,9 @@ def cmd_run(args) -> int:
         ideal = run(replace(config, joint="ideal", mode="cosim", settings={}, balls=None))
     figures = write_outputs(result, Path(args.out), ideal, plots=not args.no_plots)
     print(f"wrote {args.out}/timeseries.csv, summary.json and plots")
-    part = figures.get("rev2") or figures.get("all") or {}
+    label, part = ("second revolution", figures["rev2"]) if "rev2" in figures else ("whole run", figures.get("all"))
     if part:
-        print(f"  second revolution: max |e| = {part['max_eccentricity_m'] * 1e6:.3f} µm, "
+        print(f"  {label}: max |e| = {part['max_eccentricity_m'] * 1e6:.3f} µm, "
               f"peak |F| = {part['peak_joint_force_N']:.2f} N, "
               + (f"max ball load = {part['max_ball_load_N']:.2f} N, " if part.get('max_ball_load_N') else "")
               + f"crank moment {part['crank_moment_min_N_m']:.3f} .. {part['crank_moment_max_N_m']:.3f} N·m")

@@ -162,13 +162,17 @@ class FmuEndpoint:
         self._val_out = (ctypes.c_double * nc)()
         self._real_samples = [n for n in self.sample_names if self.variables[n].type == "Real"]
         self._int_samples = [n for n in self.sample_names if self.variables[n].type == "Integer"]
-        self.sample_names = tuple(self._real_samples + self._int_samples)
+        self._bool_samples = [n for n in self.sample_names if self.variables[n].type == "Boolean"]
+        self.sample_names = tuple(self._real_samples + self._int_samples + self._bool_samples)
         self._vr_sr = (ctypes.c_uint * len(self._real_samples))(*(self.variables[n].valueReference
                                                                     for n in self._real_samples))
         self._val_sr = (ctypes.c_double * len(self._real_samples))()
         self._vr_si = (ctypes.c_uint * len(self._int_samples))(*(self.variables[n].valueReference
                                                                    for n in self._int_samples))
         self._val_si = (ctypes.c_int * len(self._int_samples))()
+        self._vr_sb = (ctypes.c_uint * len(self._bool_samples))(*(self.variables[n].valueReference
+                                                                   for n in self._bool_samples))
+        self._val_sb = (ctypes.c_int * len(self._bool_samples))()
         n_balls = self.variables.get("n_balls")
         self.n_balls = int(self._start_values.get("n_balls", n_balls.start if n_balls is not None else 0))
 
@@ -227,7 +231,9 @@ class FmuEndpoint:
             fmu.fmi2GetReal(fmu.component, self._vr_sr, len(self._vr_sr), self._val_sr)
         if self._int_samples:
             fmu.fmi2GetInteger(fmu.component, self._vr_si, len(self._vr_si), self._val_si)
-        return list(self._val_sr) + [float(x) for x in self._val_si]
+        if self._bool_samples:
+            fmu.fmi2GetBoolean(fmu.component, self._vr_sb, len(self._vr_sb), self._val_sb)
+        return list(self._val_sr) + [float(x) for x in self._val_si] + [float(bool(x)) for x in self._val_sb]
 
     def get_state(self):
         try:

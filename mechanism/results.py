@@ -20,7 +20,8 @@ UNITS = {
     "F_x": "N", "F_y": "N", "slider_x": "m", "slider_v": "m/s", "slider_a": "m/s^2",
     "crank_moment": "N.m", "constraint_violation": "m", "omega_inner": "rad/s", "omega_outer": "rad/s",
     "cage_angle": "rad", "loaded_balls": "1", "max_ball_load": "N", "penetration": "m",
-    "contact_force": "N", "kinetic_energy": "J",
+    "contact_force": "N", "kinetic_energy": "J", "in_contact": "1", "impact_velocity": "m/s",
+    "normal_velocity": "m/s", "stiffness_skew": "N/m",
 }
 BASE_COLUMNS = ("time", "crank_angle", "e_x", "e_y", "v_x", "v_y", "F_x", "F_y", "slider_x", "slider_v",
                 "slider_a", "crank_moment", "constraint_violation", "omega_inner", "omega_outer",
