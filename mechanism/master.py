@@ -18,6 +18,9 @@ Each communication step [t_n, t_n + h]:
 A failure (an error status from the component, a non-finite state, constraints drifting
 beyond ``max_constraint_violation``) stops the run with a message naming the step, the
 time and the cause; the samples recorded so far are kept and the component is always freed.
+
+The step itself (1-3) and the sample (4) live in ``CouplingLoop``, shared with the adaptive
+driver (``mechanism.adaptive``), which also uses its ``snapshot``/``restore`` to roll back.
 """
 from __future__ import annotations
 
@@ -90,6 +93,143 @@ def substeps(h: float, x: Exchanged, mobility: float, limit: float, cap: int) ->
     return max(1, min(cap, math.ceil(h * rate / limit)))
 
 
+class CouplingLoop:
+    """The pieces of one co-simulation run, shared by ``run_master`` and ``mechanism.adaptive``.
+
+    It owns the coupling scheme, the exchanged inputs and force, and the substep counters;
+    ``start`` initialises the component, ``advance`` performs one communication step
+    (steps 1-3 of the module docstring) and ``row`` builds a sample (step 4). ``snapshot``
+    and ``restore`` save and roll back everything a step changes besides the mechanism's
+    state y: the scheme's history, the last exchange, and the component's state (through
+    the endpoint's ``get_state``/``set_state``, i.e. the FMU's get/set FMU state).
+    """
+
+    def __init__(self, system: System, settings: MasterSettings, observe: Observer,
+                 link: BearingLink | None = None, endpoint: Endpoint | None = None,
+                 reaction_force: Callable[[np.ndarray, np.ndarray], tuple[float, float]] | None = None):
+        self.system, self.settings, self.observe = system, settings, observe
+        self.link, self.endpoint, self.reaction_force = link, endpoint, reaction_force
+        self.sample_names = list(endpoint.sample_names) if endpoint is not None else []
+        self.columns = list(BASE_COLUMNS) + [c for c in self.sample_names if c not in BASE_COLUMNS]
+        self.n = system.n
+        self.scheme = make_scheme(settings.scheme) if endpoint is not None else None
+        self.inputs = None
+        self.force = (0.0, 0.0)
+        self.mobility = 0.0
+        self.substeps_max = 1
+        self.substeps_total = 0
+        n, scheme, applied = self.n, self.scheme, system.applied_forces
+
+        def rhs(tau, y):
+            q, qd = y[:n], y[n:]
+            Q = applied(q, qd, tau)
+            if link is not None:
+                ex, ey, vx, vy, _, _ = link.inputs(q, qd)
+                Fx, Fy = scheme.force(tau, ex, ey, vx, vy)
+                link.generalized_force(q, ex, ey, Fx, Fy, Q)
+            qdd = system.accelerations(q, qd, tau, Q)[0]
+            return np.concatenate((qd, qdd))
+        self.rhs = rhs
+
+    def start(self, y: np.ndarray) -> None:
+        """Initialise the component with the inputs of state y at t = 0 (no-op without a component)."""
+        if self.endpoint is None:
+            return
+        n, link = self.n, self.link
+        u = link.inputs(y[:n], y[n:])
+        out = self.endpoint.initialize(u)
+        self.inputs, self.force = u, out[:2]
+        self.scheme.push(Exchanged(0.0, *u[:4], *out))
+        if self.scheme.uses_tangent:
+            self.mobility = link.mobility(y[:n], 0.0)
+
+    def advance(self, y: np.ndarray, t0: float, h: float, step: int, t: float | None = None) -> np.ndarray:
+        """One communication step [t0, t0 + h] from state y; returns the state at its end.
+
+        ``t`` is the end time (default t0 + h; the fixed-step loop passes step * h).
+        Raises ``RunFailure`` (``step`` names it) or the component's error.
+        """
+        if t is None:
+            t = t0 + h
+        settings, scheme, endpoint, system = self.settings, self.scheme, self.endpoint, self.system
+        if endpoint is not None:
+            pending = endpoint.exchange(t0, h, self.inputs) if scheme.ordering == "jacobi" else None
+            scheme.begin_step(t0, h)
+            m = substeps(h, scheme.past[-1], self.mobility, settings.substep_limit,
+                         settings.max_substeps) if scheme.uses_tangent else 1
+        else:
+            m = 1
+        self.substeps_max = max(self.substeps_max, m)
+        self.substeps_total += m
+        hs = h / m
+        rhs = self.rhs
+        for k in range(m):
+            y = rk4_step(rhs, t0 + k * hs, y, hs)
+        if not np.all(np.isfinite(y)):
+            raise RunFailure(step, t, "the mechanism state is not finite (the integration diverged)")
+        n = self.n
+        q, qd = y[:n], y[n:]
+        if system.m:
+            drift = float(np.max(np.abs(system.phi(q, t))))
+            if drift > settings.max_constraint_violation:
+                raise RunFailure(step, t, f"constraint violation {drift:.3g} exceeds "
+                                          f"{settings.max_constraint_violation:g} (the integration diverged)")
+        if endpoint is not None:
+            u = self.link.inputs(q, qd)
+            if scheme.ordering == "jacobi":
+                out, used = pending, self.inputs
+            else:
+                out, used = endpoint.exchange(t0, h, u), u
+            if not all(math.isfinite(x) for x in out):
+                raise RunFailure(step, t, f"the bearing returned a non-finite force {out[:2]}")
+            scheme.push(Exchanged(t, *used[:4], *out))
+            self.inputs, self.force = u, out[:2]
+        return y
+
+    def row(self, t: float, y: np.ndarray) -> dict:
+        """The sample at time t for the end-of-step state y: observables, inputs, force, component samples."""
+        system, link, n = self.system, self.link, self.n
+        q, qd = y[:n], y[n:]
+        force = self.force
+        Q = system.applied_forces(q, qd, t)
+        if link is not None:
+            link.generalized_force(q, self.inputs[0], self.inputs[1], *force, Q)
+        qdd, lam = system.accelerations(q, qd, t, Q)
+        row = self.observe(q, qd, qdd, lam, t)
+        if link is not None:
+            ex, ey, vx, vy, wi, wo = self.inputs
+            row.update(e_x=ex, e_y=ey, v_x=vx, v_y=vy, omega_inner=wi, omega_outer=wo,
+                       F_x=force[0], F_y=force[1])
+            row.update(zip(self.sample_names, self.endpoint.sample()))
+        else:
+            row.update(e_x=0.0, e_y=0.0, v_x=0.0, v_y=0.0)
+            row["F_x"], row["F_y"] = self.reaction_force(q, lam)
+        row["time"] = t
+        row["constraint_violation"] = float(np.max(np.abs(system.phi(q, t)))) if system.m else 0.0
+        row["kinetic_energy"] = system.kinetic_energy(qd)
+        return row
+
+    def snapshot(self):
+        """Everything ``advance`` changes besides y, to roll back to (free it with ``release``)."""
+        endpoint = self.endpoint
+        fmu_state = endpoint.get_state() if endpoint is not None else None
+        past = tuple(self.scheme.past) if self.scheme is not None else ()
+        return past, self.inputs, self.force, fmu_state
+
+    def restore(self, snap) -> None:
+        """Roll back to ``snap`` (which stays valid for another restore)."""
+        past, self.inputs, self.force, fmu_state = snap
+        if self.scheme is not None:
+            self.scheme.past.clear()
+            self.scheme.past.extend(past)
+        if self.endpoint is not None:
+            self.endpoint.set_state(fmu_state)
+
+    def release(self, snap) -> None:
+        if self.endpoint is not None and snap[3] is not None:
+            self.endpoint.free_state(snap[3])
+
+
 def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: MasterSettings,
                observe: Observer, link: BearingLink | None = None, endpoint: Endpoint | None = None,
                reaction_force: Callable[[np.ndarray, np.ndarray], tuple[float, float]] | None = None,
@@ -102,115 +242,43 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     h = settings.step
     n_steps = int(round(settings.t_end / h))
     every = max(1, int(round(settings.output_interval / h)))
-    sample_names = list(endpoint.sample_names) if endpoint is not None else []
-    columns = list(BASE_COLUMNS) + [c for c in sample_names if c not in BASE_COLUMNS]
-    rec = Recorder(columns, n_steps // every + 2)
+    loop = CouplingLoop(system, settings, observe, link, endpoint, reaction_force)
+    rec = Recorder(loop.columns, n_steps // every + 2)
     n = system.n
-    scheme = make_scheme(settings.scheme) if endpoint is not None else None
-    zeros = np.zeros(n)
     info = dict(meta or {})
     info.update(step_s=h, output_interval_s=every * h, t_end_s=n_steps * h,
-                scheme=scheme.name if scheme else "none", endpoint=getattr(endpoint, "kind", "none"))
-    state = {"force": (0.0, 0.0), "inputs": None, "substeps_max": 1, "substeps_total": 0}
-
-    def applied(q, qd, t):
-        return system.applied_forces(q, qd, t)
-
-    def record(t, q, qd, force):
-        Q = applied(q, qd, t)
-        if link is not None:
-            link.generalized_force(q, state["inputs"][0], state["inputs"][1], *force, Q)
-        qdd, lam = system.accelerations(q, qd, t, Q)
-        row = observe(q, qd, qdd, lam, t)
-        if link is not None:
-            ex, ey, vx, vy, wi, wo = state["inputs"]
-            row.update(e_x=ex, e_y=ey, v_x=vx, v_y=vy, omega_inner=wi, omega_outer=wo,
-                       F_x=force[0], F_y=force[1])
-            row.update(zip(sample_names, endpoint.sample()))
-        else:
-            row.update(e_x=0.0, e_y=0.0, v_x=0.0, v_y=0.0)
-            row["F_x"], row["F_y"] = reaction_force(q, lam)
-        row["time"] = t
-        row["constraint_violation"] = float(np.max(np.abs(system.phi(q, t)))) if system.m else 0.0
-        row["kinetic_energy"] = system.kinetic_energy(qd)
-        rec.add(row)
-
-    def rhs(tau, y):
-        q, qd = y[:n], y[n:]
-        Q = applied(q, qd, tau)
-        if link is not None:
-            ex, ey, vx, vy, _, _ = link.inputs(q, qd)
-            Fx, Fy = scheme.force(tau, ex, ey, vx, vy)
-            link.generalized_force(q, ex, ey, Fx, Fy, Q)
-        qdd = system.accelerations(q, qd, tau, Q)[0]
-        return np.concatenate((qd, qdd))
-
+                scheme=loop.scheme.name if loop.scheme else "none", endpoint=getattr(endpoint, "kind", "none"))
     y = np.concatenate((q0, qd0)).astype(float)
     step, t = 0, 0.0
-    mobility = 0.0
     bar = tqdm(total=n_steps, desc=settings.description, unit="step", disable=not settings.progress,
                mininterval=0.5, leave=False)
     try:
-        if endpoint is not None:
-            u = link.inputs(y[:n], y[n:])
-            out = endpoint.initialize(u)
-            state["inputs"], state["force"] = u, out[:2]
-            scheme.push(Exchanged(0.0, *u[:4], *out))
-            if scheme.uses_tangent:
-                mobility = link.mobility(y[:n], 0.0)
-        record(0.0, y[:n], y[n:], state["force"])
+        loop.start(y)
+        rec.add(loop.row(0.0, y))
         for step in range(1, n_steps + 1):
             t0 = (step - 1) * h
             t = step * h
-            if endpoint is not None:
-                pending = endpoint.exchange(t0, h, state["inputs"]) if scheme.ordering == "jacobi" else None
-                scheme.begin_step(t0, h)
-                m = substeps(h, scheme.past[-1], mobility, settings.substep_limit,
-                             settings.max_substeps) if scheme.uses_tangent else 1
-            else:
-                m = 1
-            state["substeps_max"] = max(state["substeps_max"], m)
-            state["substeps_total"] += m
-            hs = h / m
-            for k in range(m):
-                y = rk4_step(rhs, t0 + k * hs, y, hs)
-            if not np.all(np.isfinite(y)):
-                raise RunFailure(step, t, "the mechanism state is not finite (the integration diverged)")
-            q, qd = y[:n], y[n:]
-            if system.m:
-                drift = float(np.max(np.abs(system.phi(q, t))))
-                if drift > settings.max_constraint_violation:
-                    raise RunFailure(step, t, f"constraint violation {drift:.3g} exceeds "
-                                              f"{settings.max_constraint_violation:g} (the integration diverged)")
-            if endpoint is not None:
-                u = link.inputs(q, qd)
-                if scheme.ordering == "jacobi":
-                    out, used = pending, state["inputs"]
-                else:
-                    out, used = endpoint.exchange(t0, h, u), u
-                if not all(math.isfinite(x) for x in out):
-                    raise RunFailure(step, t, f"the bearing returned a non-finite force {out[:2]}")
-                scheme.push(Exchanged(t, *used[:4], *out))
-                state["inputs"], state["force"] = u, out[:2]
+            y = loop.advance(y, t0, h, step, t)
             if step % every == 0:
-                record(t, q, qd, state["force"])
+                rec.add(loop.row(t, y))
             if step % 500 == 0:
                 bar.update(500)
     except RunFailure as err:
         info["failure"] = {"step": err.step, "time_s": err.time, "cause": err.cause}
-        return _finish(rec, info, "failed", str(err), endpoint, bar, state)
+        return finish(rec, info, "failed", str(err), endpoint, bar, loop)
     except Exception as err:  # an error status from the component, a singular matrix, ...
         cause = f"{type(err).__name__}: {err}"
         info["failure"] = {"step": step, "time_s": t, "cause": cause}
-        return _finish(rec, info, "failed", f"stopped at step {step} (t = {t:.9g} s): {cause}",
-                       endpoint, bar, state)
-    return _finish(rec, info, "completed", "", endpoint, bar, state)
+        return finish(rec, info, "failed", f"stopped at step {step} (t = {t:.9g} s): {cause}",
+                      endpoint, bar, loop)
+    return finish(rec, info, "completed", "", endpoint, bar, loop)
 
 
-def _finish(rec: Recorder, info: dict, status: str, message: str, endpoint, bar, state) -> RunResult:
+def finish(rec: Recorder, info: dict, status: str, message: str, endpoint, bar, loop: CouplingLoop) -> RunResult:
+    """Close the progress bar and wrap the samples and counters into a RunResult."""
     bar.close()
-    info["substeps_max"] = state["substeps_max"]
-    info["substeps_total"] = state["substeps_total"]
+    info["substeps_max"] = loop.substeps_max
+    info["substeps_total"] = loop.substeps_total
     if endpoint is not None:
         info["component_calls"] = endpoint.calls
     return RunResult(rec.columns, rec.table().copy(), info, status, message)
