@@ -184,3 +184,21 @@ def test_ideal_joint_runs_at_the_larger_step_give_the_same_result():
         np.testing.assert_allclose(coarse[col], fine[col][::every][:len(coarse[col])], rtol=0, atol=1e-8 * scale)
         # and interpolated onto the fine grid, as the report compares them with the bearing runs
         np.testing.assert_allclose(on_times(coarse, fine, col), fine[col], rtol=0, atol=1e-7 * scale)
+
+
+def test_step_size_study_is_added_to_the_report(tmp_path):
+    """Issue 6: the step-size summary and plots join the reproduction report when both exist."""
+    from mechanism.studies.reproduce import append_stepsize_study
+    study = tmp_path / "study"
+    study.mkdir()
+    (study / "stepsize_summary.md").write_text("# Co-simulation step-size study\n\n## 1200rpm\n\n| scheme |\n")
+    (study / "stepsize_error_vs_step_1200rpm.png").write_bytes(b"png")
+    report = tmp_path / "report" / "README.md"
+    report.parent.mkdir()
+    report.write_text("# Reproduction\n")
+    assert append_stepsize_study(report, study)
+    text = report.read_text()
+    assert "## Co-simulation step size" in text and "### 1200rpm" in text
+    assert "figures/stepsize_error_vs_step_1200rpm.png" in text
+    assert (report.parent / "figures" / "stepsize_error_vs_step_1200rpm.png").is_file()
+    assert not append_stepsize_study(report, tmp_path / "missing")

@@ -32,6 +32,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import shutil
 import sys
 import time
@@ -319,8 +320,12 @@ def run_all(out: Path, specs: list[RunSpec], force: bool = False, workers: int |
 
 
 def reproduce(out: str | Path, force: bool = False, workers: int | None = None, revs: float = 2.0,
-              specs: list[RunSpec] | None = None, report: bool = True, progress: bool = True) -> dict:
-    """Run (or reuse) the reproduction's runs and write the report; ``specs`` limits the run list."""
+              specs: list[RunSpec] | None = None, report: bool = True, progress: bool = True,
+              stepsize: str | Path | None = None) -> dict:
+    """Run (or reuse) the reproduction's runs and write the report; ``specs`` limits the run list.
+
+    ``stepsize``: the output folder of a ``stepsize-study``; its summary and plots are added to the report.
+    """
     out = Path(out)
     specs = run_specs(revs) if specs is None else list(specs)
     t0 = time.perf_counter()
@@ -329,16 +334,36 @@ def reproduce(out: str | Path, force: bool = False, workers: int | None = None, 
     if report:
         from .reproduce_report import write_report
         outcome["report"] = write_report(out, specs, outcome)
+        if stepsize is not None:
+            append_stepsize_study(outcome["report"], Path(stepsize))
     outcome["total_s"] = time.perf_counter() - t0
     return outcome
 
 
 # --- command line -----------------------------------------------------------------------------------
+def append_stepsize_study(report: Path, study: Path) -> bool:
+    """Append a step-size study's summary (headings one level down) and plots to the report."""
+    summary = study / "stepsize_summary.md"
+    if not summary.is_file():
+        return False
+    text = re.sub(r"^(#+)", r"#\1", summary.read_text(encoding="utf-8"), flags=re.M)
+    figures = report.parent / "figures"
+    figures.mkdir(parents=True, exist_ok=True)
+    links = []
+    for png in sorted(study.glob("stepsize_*.png")):
+        shutil.copy2(png, figures / png.name)
+        links.append(f"![{png.stem}](figures/{png.name})")
+    with open(report, "a", encoding="utf-8") as f:
+        f.write(f"\n## Co-simulation step size\n\nFrom `python -m mechanism stepsize-study` in `{study}`"
+                f" (docs/stepsize-study.md).\n\n{text}\n" + "\n\n".join(links) + "\n")
+    return True
+
+
 def cmd_reproduce(args) -> int:
     if args.revs <= 0:
         raise ValueError("--revs must be positive")
     outcome = reproduce(args.out, force=args.force, workers=args.workers, revs=args.revs,
-                        progress=not args.quiet)
+                        progress=not args.quiet, stepsize=args.stepsize)
     failed = [n for n, r in outcome["results"].items() if not r.ok]
     print(f"{len(outcome['computed'])} run(s) computed, {len(outcome['cached'])} from the cache "
           f"({outcome['elapsed_s']:.1f} s on {outcome['workers']} worker(s)); total {outcome['total_s']:.1f} s")
@@ -356,5 +381,7 @@ def register(subparsers) -> None:
     p.add_argument("--force", action="store_true", help="recompute every run (ignore the cache)")
     p.add_argument("--workers", type=int, default=None, help="parallel runs (default: the number of cores)")
     p.add_argument("--revs", type=float, default=2.0, help="crank revolutions per run (default 2, as the paper)")
+    p.add_argument("--stepsize", default=None, metavar="DIR",
+                   help="add the results of `stepsize-study --out DIR` to the report")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_reproduce)
