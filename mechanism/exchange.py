@@ -23,11 +23,11 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 from fmu_bearing.ball_bearing import BallBearing, BearingInputError
+from fmu_bearing.interface import COUPLING_OUTPUT_NAMES, JOINT_INPUT_NAMES
 from fmu_bearing.parameters import BearingParameterError, BearingParameters
 
-INPUTS = ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")
-COUPLING_OUTPUTS = ("F_x", "F_y", "stiffness_xx", "stiffness_xy", "stiffness_yy",
-                    "damping_xx", "damping_xy", "damping_yy")
+INPUTS = JOINT_INPUT_NAMES
+COUPLING_OUTPUTS = COUPLING_OUTPUT_NAMES
 
 
 class ExchangeError(RuntimeError):

@@ -31,6 +31,7 @@ from pythonfmu.enums import Fmi2Status
 
 from fmu_bearing import ball_bearing as physics
 from fmu_bearing.parameters import BearingParameters
+from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
 from fmu_bearing.slaves import guard_pythonfmu_exit, hold_before_raise
 
 #: per-ball outputs when the FMU was built without an explicit --max-balls
@@ -54,26 +55,11 @@ UNIT_DEFINITIONS = {
     "N/m1.5": None,
 }
 
-#: (name, unit, description) of the inputs, in value-reference order
-INPUTS = (
-    ("e_x", "m", "eccentricity x: journal (inner ring) centre minus housing (outer ring) centre, global frame"),
-    ("e_y", "m", "eccentricity y: journal (inner ring) centre minus housing (outer ring) centre, global frame"),
-    ("v_x", "m/s", "time derivative of e_x (journal minus housing velocity, x)"),
-    ("v_y", "m/s", "time derivative of e_y (journal minus housing velocity, y)"),
-    ("omega_inner", "rad/s", "absolute angular velocity of the journal body (inner ring)"),
-    ("omega_outer", "rad/s", "absolute angular velocity of the housing body (outer ring)"),
-)
+#: (name, unit, description) of the inputs, in value-reference order: the joint-component interface
+INPUTS = JOINT_INPUTS
 
 #: outputs in the order of physics.BearingForce, (name, unit, description); unit None: Integer
-FORCE_OUTPUTS = (
-    ("F_x", "N", "bearing force on the housing body, x (the journal body receives -F_x), end of step"),
-    ("F_y", "N", "bearing force on the housing body, y (the journal body receives -F_y), end of step"),
-    ("stiffness_xx", "N/m", "tangent stiffness dF_x/de_x"),
-    ("stiffness_xy", "N/m", "tangent stiffness dF_x/de_y = dF_y/de_x"),
-    ("stiffness_yy", "N/m", "tangent stiffness dF_y/de_y"),
-    ("damping_xx", "N.s/m", "tangent damping dF_x/dv_x"),
-    ("damping_xy", "N.s/m", "tangent damping dF_x/dv_y = dF_y/dv_x"),
-    ("damping_yy", "N.s/m", "tangent damping dF_y/dv_y"),
+FORCE_OUTPUTS = COUPLING_OUTPUTS + (
     ("loaded_balls", None, "number of balls carrying load"),
     ("max_ball_load", "N", "largest ball load"),
 )

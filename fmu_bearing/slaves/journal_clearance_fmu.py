@@ -32,29 +32,16 @@ from pythonfmu.enums import Fmi2Status
 from fmu_bearing import clearance_joint as physics
 from fmu_bearing.ball_bearing import BearingInputError
 from fmu_bearing.clearance_joint import ClearanceParameters, ContactState
+from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
 from fmu_bearing.slaves import guard_pythonfmu_exit, hold_before_raise
 from fmu_bearing.slaves.ball_bearing_fmu import UNIT_DEFINITIONS, BooleanVariable, RealVariable
 
 #: (name, unit, description) of the inputs, in value-reference order: those of the BallBearing FMU
-INPUTS = (
-    ("e_x", "m", "eccentricity x: journal centre minus housing (bushing) centre, global frame"),
-    ("e_y", "m", "eccentricity y: journal centre minus housing (bushing) centre, global frame"),
-    ("v_x", "m/s", "time derivative of e_x (journal minus housing velocity, x)"),
-    ("v_y", "m/s", "time derivative of e_y (journal minus housing velocity, y)"),
-    ("omega_inner", "rad/s", "absolute angular velocity of the journal body (unused; BallBearing compatibility)"),
-    ("omega_outer", "rad/s", "absolute angular velocity of the housing body (unused; BallBearing compatibility)"),
-)
+#: (the ring speeds are unused here; present so the FMUs are drop-in replacements)
+INPUTS = JOINT_INPUTS
 
 #: outputs in the order of physics.ClearanceForce, (name, unit, description)
-FORCE_OUTPUTS = (
-    ("F_x", "N", "contact force on the housing body, x (the journal body receives -F_x), end of step"),
-    ("F_y", "N", "contact force on the housing body, y (the journal body receives -F_y), end of step"),
-    ("stiffness_xx", "N/m", "tangent stiffness dF_x/de_x"),
-    ("stiffness_xy", "N/m", "tangent stiffness, symmetric part (dF_x/de_y + dF_y/de_x)/2"),
-    ("stiffness_yy", "N/m", "tangent stiffness dF_y/de_y"),
-    ("damping_xx", "N.s/m", "tangent damping dF_x/dv_x"),
-    ("damping_xy", "N.s/m", "tangent damping dF_x/dv_y = dF_y/dv_x"),
-    ("damping_yy", "N.s/m", "tangent damping dF_y/dv_y"),
+FORCE_OUTPUTS = COUPLING_OUTPUTS + (
     ("stiffness_skew", "N/m", "tangent stiffness, skew part (dF_x/de_y - dF_y/de_x)/2"),
     ("penetration", "m", "penetration |e| - radial_clearance (negative inside the clearance)"),
     ("contact_force", "N", "normal contact force F_n >= 0"),

@@ -45,6 +45,7 @@ import numpy as np
 from pythonfmu import DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
 from pythonfmu.enums import Fmi2Status
 
+from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
 from fmu_bearing.slaves import guard_pythonfmu_exit, hold_before_raise
 from fmu_bearing.slaves.ball_bearing_fmu import (BooleanVariable as _Boolean, IntegerVariable as _Integer,
                                               RealVariable as _Real, _TypeAttributes)
@@ -74,26 +75,12 @@ UNIT_DEFINITIONS = {
     "N.s/m": {"kg": 1, "s": -1},
 }
 
-#: (name, unit, description) of the inputs, in value-reference order
-INPUTS = (
-    ("F_x", "N", "bearing force on the housing (crank), x; the journal (rod) receives -F_x"),
-    ("F_y", "N", "bearing force on the housing (crank), y; the journal (rod) receives -F_y"),
-    ("stiffness_xx", "N/m", "bearing tangent stiffness dF_x/de_x (0: zero-order hold)"),
-    ("stiffness_xy", "N/m", "bearing tangent stiffness dF_x/de_y = dF_y/de_x"),
-    ("stiffness_yy", "N/m", "bearing tangent stiffness dF_y/de_y"),
-    ("damping_xx", "N.s/m", "bearing tangent damping dF_x/dv_x"),
-    ("damping_xy", "N.s/m", "bearing tangent damping dF_x/dv_y = dF_y/dv_x"),
-    ("damping_yy", "N.s/m", "bearing tangent damping dF_y/dv_y"),
-)
+#: (name, unit, description) of the inputs, in value-reference order: a joint component's coupling
+#: outputs (stiffness and damping 0: the force is held, zero-order hold)
+INPUTS = COUPLING_OUTPUTS
 
-#: (name, unit, description) of the outputs, in value-reference order
-OUTPUTS = (
-    ("e_x", "m", "eccentricity x: journal (rod) minus housing (crank) ring centre, eq. (10)"),
-    ("e_y", "m", "eccentricity y: journal (rod) minus housing (crank) ring centre, eq. (10)"),
-    ("v_x", "m/s", "time derivative of e_x, eq. (11)-(12)"),
-    ("v_y", "m/s", "time derivative of e_y, eq. (11)-(12)"),
-    ("omega_inner", "rad/s", "angular velocity of the journal body (connecting rod, inner ring)"),
-    ("omega_outer", "rad/s", "angular velocity of the housing body (crank, outer ring)"),
+#: (name, unit, description) of the outputs, in value-reference order: a joint component's inputs first
+OUTPUTS = JOINT_INPUTS + (
     ("slider_x", "m", "slider position"),
     ("slider_v", "m/s", "slider velocity"),
     ("slider_a", "m/s2", "slider acceleration (eq. 9 at the end of the step)"),
