@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 from mechanism import run as run_module
 from mechanism.exchange import FmuEndpoint, InProcessEndpoint

@@ -74,7 +74,7 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import NamedTuple
 
-from .ball_bearing import BearingInputError, check_joint_inputs
+from .ball_bearing import BearingInputError, check_joint_inputs  # noqa: F401 (re-exported: its error type)
 from .parameters import BearingParameterError, BearingParameters, _param
 
 #: The ball bearing's diametral clearance P_d [m]; this joint's default per-side clearance is P_d / 2.

@@ -4,10 +4,14 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .bearing_joint import CONTACT_POINTS
 from .coupling import DEFAULT_SCHEME, SCHEMES
 from .monolithic import METHODS
+
+if TYPE_CHECKING:
+    from .run import RunConfig
 
 
 def parse_setting(text: str) -> tuple[str, object]:

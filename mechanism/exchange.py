@@ -16,7 +16,6 @@ only at the output interval, because each value fetched through an FMU costs tim
 from __future__ import annotations
 
 import ctypes
-import math
 import shutil
 from dataclasses import fields
 from pathlib import Path

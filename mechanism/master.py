@@ -244,7 +244,6 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     every = max(1, int(round(settings.output_interval / h)))
     loop = CouplingLoop(system, settings, observe, link, endpoint, reaction_force)
     rec = Recorder(loop.columns, n_steps // every + 2)
-    n = system.n
     info = dict(meta or {})
     info.update(step_s=h, output_interval_s=every * h, t_end_s=n_steps * h,
                 scheme=loop.scheme.name if loop.scheme else "none", endpoint=getattr(endpoint, "kind", "none"))

@@ -10,8 +10,6 @@ at the output grid, so a failure keeps what was computed up to it.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from scipy.integrate import BDF, LSODA, Radau
 from tqdm import tqdm

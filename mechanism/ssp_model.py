@@ -33,6 +33,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path, PurePosixPath
 from xml.etree import ElementTree as ET
 
+from fmu_bearing.interface import COUPLING_OUTPUT_NAMES, JOINT_INPUT_NAMES
 from fmu_bearing.parameters import BearingParameters
 from .slider_crank import SliderCrankParameters
 
@@ -87,18 +88,16 @@ def _interfaces() -> dict[str, list[tuple[str, str, str, str | None]]]:
 
 
 #: the bearing's inputs (from the mechanism) and the coupling outputs (to the mechanism), same names
-BEARING_INPUTS = ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")
-COUPLING_OUTPUTS = ("F_x", "F_y", "stiffness_xx", "stiffness_xy", "stiffness_yy",
-                    "damping_xx", "damping_xy", "damping_yy")
+BEARING_INPUTS = JOINT_INPUT_NAMES
+COUPLING_OUTPUTS = COUPLING_OUTPUT_NAMES
 CONNECTIONS = tuple([(MECHANISM, n, BEARING, n) for n in BEARING_INPUTS]
                     + [(BEARING, n, MECHANISM, n) for n in COUPLING_OUTPUTS])
 
 
 def unit_definitions() -> dict[str, dict | None]:
     """unit -> SSP BaseUnit attributes (exponents, factor); None where there is no integer-exponent form."""
-    from fmu_bearing.slaves import ball_bearing_fmu as bb
-    from .slaves import slider_crank_fmu as sc
-    return {**bb.UNIT_DEFINITIONS, **sc.UNIT_DEFINITIONS}
+    from fmu_bearing.slaves import UNIT_DEFINITIONS
+    return dict(UNIT_DEFINITIONS)
 
 
 @dataclass(frozen=True)

@@ -111,7 +111,6 @@ def _energy_terms(r, bearing: BallBearing):
     t = r["time"]
     omega_crank = SC.omega
     crank_work = np.concatenate([[0.0], np.cumsum(0.5 * np.diff(t) * (r["crank_moment"][1:] + r["crank_moment"][:-1]))]) * omega_crank
-    n = bearing.n_balls
     U = np.array([bearing.elastic_energy(ex, ey, c) for ex, ey, c in zip(r["e_x"], r["e_y"], r["cage_angle"])])
     p_cage = np.zeros_like(t)
     p_diss = np.zeros_like(t)

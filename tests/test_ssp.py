@@ -7,7 +7,7 @@ import math
 import re
 import shutil
 import zipfile
-from dataclasses import replace
+
 from pathlib import Path
 
 import numpy as np

@@ -26,9 +26,45 @@ standard library is imported here):
 import atexit
 import ctypes
 import glob
+import math
 import os
 import sys
 import threading
+from xml.etree.ElementTree import Element, SubElement
+
+#: SI base-unit exponents (and factor) of every unit our FMUs declare; None: no integer-exponent form
+UNIT_DEFINITIONS = {
+    "1": {},
+    "m": {"m": 1},
+    "m/s": {"m": 1, "s": -1},
+    "m/s2": {"m": 1, "s": -2},
+    "rad": {"rad": 1},
+    "rad/s": {"rad": 1, "s": -1},
+    "rev/min": {"rad": 1, "s": -1, "factor": 2.0 * math.pi / 60.0},
+    "kg": {"kg": 1},
+    "kg.m2": {"kg": 1, "m": 2},
+    "N": {"kg": 1, "m": 1, "s": -2},
+    "N.m": {"kg": 1, "m": 2, "s": -2},
+    "N/m": {"kg": 1, "s": -2},
+    "N.s/m": {"kg": 1, "s": -1},
+    "Pa": {"kg": 1, "m": -1, "s": -2},
+    "Pa.s": {"kg": 1, "m": -1, "s": -1},
+    "1/Pa": {"kg": -1, "m": 1, "s": 2},
+    "N/m1.5": None,                      # FMI exponents are integers: declared by name only
+}
+
+
+def add_unit_definitions(root, variables) -> None:
+    """Insert <UnitDefinitions> for every unit the variables use into a modelDescription root (FMI 2.0 order:
+    right after CoSimulation). Variables carry their unit in ``type_attributes`` (ball_bearing_fmu)."""
+    used = {getattr(v, "type_attributes", {}).get("unit") for v in variables}
+    units = Element("UnitDefinitions")
+    for unit in sorted(u for u in used if u):
+        node = SubElement(units, "Unit", {"name": unit})
+        exponents = UNIT_DEFINITIONS[unit]
+        if exponents is not None:
+            SubElement(node, "BaseUnit", {k: repr(v) if k == "factor" else str(v) for k, v in exponents.items()})
+    root.insert(1, units)
 
 #: extra references that balance pythonfmu 0.7's over-release on the exception path (see above)
 PYTHONFMU_EXCEPTION_REFS = []

@@ -23,7 +23,6 @@ import math
 import os
 from dataclasses import fields
 from functools import partial
-from xml.etree.ElementTree import Element, SubElement
 
 from pythonfmu import (Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability,
                        Integer, Real)
@@ -32,28 +31,12 @@ from pythonfmu.enums import Fmi2Status
 from fmu_bearing import ball_bearing as physics
 from fmu_bearing.parameters import BearingParameters
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
-from fmu_bearing.slaves import guard_pythonfmu_exit, hold_before_raise
+from fmu_bearing.slaves import add_unit_definitions, guard_pythonfmu_exit, hold_before_raise
 
 #: per-ball outputs when the FMU was built without an explicit --max-balls
 DEFAULT_CAPACITY = 20
 #: build options written into the FMU's resources folder by build_fmu.py
 BUILD_OPTIONS_FILE = "build_options.json"
-
-#: SI base-unit exponents of each declared unit; None: no integer-exponent form (m^-0.5), name only.
-UNIT_DEFINITIONS = {
-    "1": {},
-    "m": {"m": 1},
-    "m/s": {"m": 1, "s": -1},
-    "rad": {"rad": 1},
-    "rad/s": {"rad": 1, "s": -1},
-    "N": {"kg": 1, "m": 1, "s": -2},
-    "N/m": {"kg": 1, "s": -2},
-    "N.s/m": {"kg": 1, "s": -1},
-    "Pa": {"kg": 1, "m": -1, "s": -2},
-    "Pa.s": {"kg": 1, "m": -1, "s": -1},
-    "1/Pa": {"kg": -1, "m": 1, "s": 2},
-    "N/m1.5": None,
-}
 
 #: (name, unit, description) of the inputs, in value-reference order: the joint-component interface
 INPUTS = JOINT_INPUTS
@@ -193,14 +176,7 @@ class BallBearing(Fmi2Slave):
     def to_xml(self, model_options=dict()):
         """pythonfmu's modelDescription plus <UnitDefinitions> for every unit the variables use."""
         root = super().to_xml(model_options)
-        used = {v.type_attributes.get("unit") for v in self.vars.values() if isinstance(v, _TypeAttributes)}
-        units = Element("UnitDefinitions")
-        for unit in sorted(u for u in used if u):
-            node = SubElement(units, "Unit", {"name": unit})
-            exponents = UNIT_DEFINITIONS[unit]
-            if exponents is not None:
-                SubElement(node, "BaseUnit", {k: str(v) for k, v in exponents.items()})
-        root.insert(1, units)  # FMI 2.0 order: CoSimulation, UnitDefinitions, ..., LogCategories, ...
+        add_unit_definitions(root, self.vars.values())
         return root
 
     # --- FMI ----------------------------------------------------------------------------------

@@ -24,7 +24,6 @@ unit table are imported from ``ball_bearing_fmu``.
 import math
 from dataclasses import fields
 from functools import partial
-from xml.etree.ElementTree import Element, SubElement
 
 from pythonfmu import DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
 from pythonfmu.enums import Fmi2Status
@@ -33,8 +32,8 @@ from fmu_bearing import clearance_joint as physics
 from fmu_bearing.ball_bearing import BearingInputError
 from fmu_bearing.clearance_joint import ClearanceParameters, ContactState
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
-from fmu_bearing.slaves import guard_pythonfmu_exit, hold_before_raise
-from fmu_bearing.slaves.ball_bearing_fmu import UNIT_DEFINITIONS, BooleanVariable, RealVariable
+from fmu_bearing.slaves import add_unit_definitions, guard_pythonfmu_exit, hold_before_raise
+from fmu_bearing.slaves.ball_bearing_fmu import BooleanVariable, RealVariable
 
 #: (name, unit, description) of the inputs, in value-reference order: those of the BallBearing FMU
 #: (the ring speeds are unused here; present so the FMUs are drop-in replacements)
@@ -100,14 +99,7 @@ class JournalClearance(Fmi2Slave):
     def to_xml(self, model_options=dict()):
         """pythonfmu's modelDescription plus <UnitDefinitions> for every unit the variables use."""
         root = super().to_xml(model_options)
-        used = {getattr(v, "type_attributes", {}).get("unit") for v in self.vars.values()}
-        units = Element("UnitDefinitions")
-        for unit in sorted(u for u in used if u):
-            node = SubElement(units, "Unit", {"name": unit})
-            exponents = UNIT_DEFINITIONS[unit]
-            if exponents is not None:
-                SubElement(node, "BaseUnit", {k: str(v) for k, v in exponents.items()})
-        root.insert(1, units)  # FMI 2.0 order: CoSimulation, UnitDefinitions, ..., LogCategories, ...
+        add_unit_definitions(root, self.vars.values())
         return root
 
     # --- FMI ----------------------------------------------------------------------------------

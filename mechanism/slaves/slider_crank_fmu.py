@@ -39,16 +39,16 @@ the slave class by a regular expression on its source, so it uses absolute impor
 import math
 from dataclasses import astuple, fields
 from functools import partial
-from xml.etree.ElementTree import Element, SubElement
+from xml.etree.ElementTree import SubElement
 
 import numpy as np
 from pythonfmu import DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
 from pythonfmu.enums import Fmi2Status
 
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
-from fmu_bearing.slaves import guard_pythonfmu_exit, hold_before_raise
+from fmu_bearing.slaves import add_unit_definitions, guard_pythonfmu_exit, hold_before_raise
 from fmu_bearing.slaves.ball_bearing_fmu import (BooleanVariable as _Boolean, IntegerVariable as _Integer,
-                                              RealVariable as _Real, _TypeAttributes)
+                                              RealVariable as _Real)
 from mechanism.bearing_joint import BearingLink
 from mechanism.coupling import Exchanged, InterfaceJacobian, InterfaceJacobianDrift
 from mechanism.integrators import rk4_step
@@ -57,23 +57,6 @@ from mechanism.slider_crank import CRANK, SLIDER, SliderCrankParameters, build, 
 from mechanism.solver import System
 
 MODEL_NAME = "SliderCrank"
-
-#: SI base-unit exponents (and factor) of each unit the variables declare
-UNIT_DEFINITIONS = {
-    "1": {},
-    "m": {"m": 1},
-    "m/s": {"m": 1, "s": -1},
-    "m/s2": {"m": 1, "s": -2},
-    "rad": {"rad": 1},
-    "rad/s": {"rad": 1, "s": -1},
-    "rev/min": {"rad": 1, "s": -1, "factor": 2.0 * math.pi / 60.0},
-    "kg": {"kg": 1},
-    "kg.m2": {"kg": 1, "m": 2},
-    "N": {"kg": 1, "m": 1, "s": -2},
-    "N.m": {"kg": 1, "m": 2, "s": -2},
-    "N/m": {"kg": 1, "s": -2},
-    "N.s/m": {"kg": 1, "s": -1},
-}
 
 #: (name, unit, description) of the inputs, in value-reference order: a joint component's coupling
 #: outputs (stiffness and damping 0: the force is held, zero-order hold)
@@ -173,13 +156,7 @@ class SliderCrank(Fmi2Slave):
     def to_xml(self, model_options=dict()):
         """pythonfmu's modelDescription plus <UnitDefinitions> for every unit the variables use."""
         root = super().to_xml(model_options)
-        used = {v.type_attributes.get("unit") for v in self.vars.values() if isinstance(v, _TypeAttributes)}
-        units = Element("UnitDefinitions")
-        for unit in sorted(u for u in used if u):
-            node = SubElement(units, "Unit", {"name": unit})
-            SubElement(node, "BaseUnit", {k: repr(v) if k == "factor" else str(v)
-                                          for k, v in UNIT_DEFINITIONS[unit].items()})
-        root.insert(1, units)  # FMI 2.0 order: CoSimulation, UnitDefinitions, ...
+        add_unit_definitions(root, self.vars.values())
         # The outputs are calculated at initialisation (initial="calculated"): list them as InitialUnknowns.
         structure = root.find("ModelStructure")
         initial = SubElement(structure, "InitialUnknowns")

@@ -779,7 +779,7 @@ class Report:
         fig.suptitle("Fig. 23–24: journal-centre trajectories at 1200 rpm")
         fname = _save(fig, self.fig_dir / "fig23_24_clearance_trajectories.png")
         eb, ec = self.table[self.b1200]["max_e"], self.table[self.clear]["max_e"]
-        mb, mc = window(b), window(c)
+        mb = window(b)
         ang_b = np.unwrap(np.arctan2(b["e_y"], b["e_x"]))
         ang_c = np.interp(b["time"], c["time"], np.unwrap(np.arctan2(c["e_y"], c["e_x"])))
         dang = np.angle(np.exp(1j * (ang_b - ang_c)))[mb]
