@@ -74,9 +74,6 @@ class BearingParameters:
         return self.eccentricity_limit if self.eccentricity_limit > 0 else 0.05 * self.ball_diameter
 
 
-PARAMETER_NAMES = tuple(f.name for f in fields(BearingParameters))
-
-
 def validate(p: BearingParameters, capacity: int | None = None) -> None:
     """Raise BearingParameterError naming the first invalid parameter of ``p``.
 

@@ -7,7 +7,6 @@ at which step, at what time and why.
 from __future__ import annotations
 
 import csv
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,7 +17,7 @@ import numpy as np
 UNITS = {
     "time": "s", "crank_angle": "rad", "e_x": "m", "e_y": "m", "v_x": "m/s", "v_y": "m/s",
     "F_x": "N", "F_y": "N", "slider_x": "m", "slider_v": "m/s", "slider_a": "m/s^2",
-    "crank_moment": "N.m", "constraint_violation": "m", "omega_inner": "rad/s", "omega_outer": "rad/s",
+    "crank_moment": "N.m", "constraint_violation": "m or rad", "omega_inner": "rad/s", "omega_outer": "rad/s",
     "cage_angle": "rad", "loaded_balls": "1", "max_ball_load": "N", "penetration": "m",
     "contact_force": "N", "kinetic_energy": "J", "in_contact": "1", "impact_velocity": "m/s",
     "normal_velocity": "m/s", "stiffness_skew": "N/m",
@@ -127,10 +126,3 @@ def read_csv(path: Path) -> RunResult:
         header = next(csv.reader(f))
     data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     return RunResult([h.split(" [")[0] for h in header], data)
-
-
-def write_summary(r: RunResult, path: Path) -> dict:
-    s = summary(r)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(s, indent=2, default=float) + "\n")
-    return s

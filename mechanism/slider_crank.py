@@ -98,28 +98,3 @@ def initial_state(system: System, params: SliderCrankParameters = SliderCrankPar
     if system.n != ideal.n:
         raise ValueError("system is not a slider-crank built by build()")
     return q0, qd0
-
-
-def crank_angle(q: np.ndarray) -> float:
-    """Crank angle theta_1 [rad]."""
-    return float(q[2])
-
-
-def rod_angle(q: np.ndarray) -> float:
-    """Connecting-rod angle theta_2 [rad]."""
-    return float(q[5])
-
-
-def slider_position(q: np.ndarray) -> float:
-    """Slider x [m]."""
-    return float(q[6])
-
-
-def slider_velocity(qd: np.ndarray) -> float:
-    """Slider velocity xd [m/s]."""
-    return float(qd[6])
-
-
-def slider_acceleration(qdd: np.ndarray) -> float:
-    """Slider acceleration xdd [m/s^2]."""
-    return float(qdd[6])
