@@ -15,8 +15,12 @@ only at the output interval, because each value fetched through an FMU costs tim
 """
 from __future__ import annotations
 
+import atexit
 import ctypes
+import os
 import shutil
+import tempfile
+import threading
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -30,6 +34,44 @@ COUPLING_OUTPUTS = COUPLING_OUTPUT_NAMES
 
 class ExchangeError(RuntimeError):
     """The bearing component refused a call (error status); the message says why."""
+
+
+#: (resolved FMU path, size, mtime, GUID) -> folder it is extracted into, shared by every FmuEndpoint
+_EXTRACTIONS: dict[tuple, str] = {}
+_EXTRACTIONS_LOCK = threading.Lock()
+
+
+def _remove_extractions() -> None:
+    for folder in _EXTRACTIONS.values():
+        shutil.rmtree(folder, ignore_errors=True)
+    _EXTRACTIONS.clear()
+
+
+def shared_extraction(path: Path, guid: str) -> str:
+    """The folder ``path`` (an FMU of ``guid``) is extracted into: one per FMU file and GUID in a process.
+
+    A loaded FMU binary stays mapped (unloading pythonfmu's library with Python running in it is unsafe),
+    so a fresh extraction per instance maps another copy of it every time (issue 14: 200 load/unload
+    cycles grew the resident memory by 64 MB). The folders are removed at exit; an extraction that fails
+    (a full TMPDIR) is removed at once.
+    """
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns, guid)
+    with _EXTRACTIONS_LOCK:
+        folder = _EXTRACTIONS.get(key)
+        if folder is not None and os.path.isdir(folder):
+            return folder
+        from fmpy import extract
+        folder = tempfile.mkdtemp(prefix=f"fmu_{path.stem}_")
+        try:
+            extract(str(path), unzipdir=folder)
+        except BaseException:
+            shutil.rmtree(folder, ignore_errors=True)
+            raise
+        if not _EXTRACTIONS:
+            atexit.register(_remove_extractions)
+        _EXTRACTIONS[key] = folder
+        return folder
 
 
 class InProcessEndpoint:
@@ -101,7 +143,7 @@ class FmuEndpoint:
 
     def __init__(self, fmu_path: str | Path, start_values: Mapping[str, float] | None = None,
                  instance_name: str = "bearing", logging_on: bool = False):
-        from fmpy import extract, read_model_description
+        from fmpy import read_model_description
         from fmpy.fmi2 import (
             FMU2Slave,
             calloc,
@@ -125,7 +167,8 @@ class FmuEndpoint:
                                   if v.causality == "output" and v.name not in self.coupling_names)
         self.messages: list[str] = []
         self.calls = 0
-        self._unzipdir = extract(str(self.path))
+        self._check_start_values(start_values or {})
+        self._unzipdir = shared_extraction(self.path, self.md.guid)
 
         def _log(component, instance, status, category, message):
             self.messages.append(f"[{['OK', 'WARNING', 'DISCARD', 'ERROR', 'FATAL', 'PENDING'][status]}] "
@@ -144,11 +187,6 @@ class FmuEndpoint:
                              modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=instance_name)
         self._instantiated = False
         self._start_values = dict(start_values or {})
-        for name in self._start_values:
-            v = self.variables.get(name)
-            if v is None or v.causality not in ("parameter", "input"):
-                params = sorted(n for n, x in self.variables.items() if x.causality == "parameter")
-                raise ExchangeError(f"{self.path.name} has no parameter {name!r} (parameters: {', '.join(params)})")
         n_real = ctypes.c_uint * 6
         self._vr_in = n_real(*(self.variables[n].valueReference for n in INPUTS))
         self._val_in = (ctypes.c_double * 6)()
@@ -170,6 +208,26 @@ class FmuEndpoint:
         self._val_sb = (ctypes.c_int * len(self._bool_samples))()
         n_balls = self.variables.get("n_balls")
         self.n_balls = int(self._start_values.get("n_balls", n_balls.start if n_balls is not None else 0))
+
+    def _check_start_values(self, values: Mapping[str, float]) -> None:
+        """Each start value is a parameter or input of the FMU, of its type and within its declared min/max
+        (n_balls beyond the per-ball capacity: the advice names the options that fix it)."""
+        for name, value in values.items():
+            v = self.variables.get(name)
+            if v is None or v.causality not in ("parameter", "input"):
+                params = sorted(n for n, x in self.variables.items() if x.causality == "parameter")
+                raise ExchangeError(f"{self.path.name} has no parameter {name!r} (parameters: {', '.join(params)})")
+            if v.type == "Integer" and (isinstance(value, bool) or not float(value).is_integer()):
+                raise ExchangeError(f"invalid parameter {name} = {value!r}: must be an integer")
+            if v.type in ("Integer", "Real") and not isinstance(value, bool):
+                lo, hi = (float(x) if x not in (None, "") else None for x in (v.min, v.max))
+                if lo is not None and float(value) < lo:
+                    raise ExchangeError(f"invalid parameter {name} = {value!r}: below {self.path.name}'s min {lo:g}")
+                if hi is not None and float(value) > hi:
+                    advice = (f" (per-ball output capacity; build an FMU with `python build_fmu.py --max-balls "
+                              f"{value}` and pass it with --fmu)" if name == "n_balls" else "")
+                    raise ExchangeError(f"invalid parameter {name} = {value!r}: above {self.path.name}'s "
+                                        f"max {hi:g}{advice}")
 
     def _fail(self, what: str, err: Exception) -> ExchangeError:
         detail = "; ".join(self.messages[-3:]) or str(err)
@@ -257,7 +315,10 @@ class FmuEndpoint:
             except Exception:
                 pass
             self._instantiated = False
-        shutil.rmtree(self._unzipdir, ignore_errors=True)
+        # the extraction is shared (shared_extraction); drop the references that tie this object to the
+        # instance (the logger closure refers back to self)
+        self._callbacks = None
+        self.messages = []
 
     def __enter__(self):
         return self
