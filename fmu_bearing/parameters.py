@@ -74,7 +74,7 @@ class BearingParameters:
         return self.eccentricity_limit if self.eccentricity_limit > 0 else 0.05 * self.ball_diameter
 
 
-#: documented physical range [min, max] of each number (SI; docs/fmu-interface.md): far beyond any real
+#: documented physical range [min, max] of each number (poisson_ratio: (0, 0.5), checked in ``validate``) (SI; docs/robustness.md): far beyond any real
 #: ball bearing, so that only absurd values (a stiffness of 1e300) are refused.
 RANGES = {
     "n_balls": (3, 1000),
@@ -86,9 +86,8 @@ RANGES = {
     "outside_diameter": (0.0, 10.0),
     "radial_clearance": (0.0, 1e-2),
     "youngs_modulus": (1e6, 1e13),
-    "poisson_ratio": (0.0, 0.5),
-    "inner_groove_conformity": (0.5, 10.0),
-    "outer_groove_conformity": (0.5, 10.0),
+    "inner_groove_conformity": (-math.inf, 10.0),     # > 0.5: checked below with its reason
+    "outer_groove_conformity": (-math.inf, 10.0),
     "damping_model": (0, 2),
     "damping_coefficient": (0.0, 1e8),
     "oil_viscosity": (0.0, 1e3),
@@ -113,7 +112,7 @@ def validate(p: BearingParameters, capacity: int | None = None) -> None:
             raise BearingParameterError(f.name, v, "must be an integer")
         lo, hi = RANGES.get(f.name, (-math.inf, math.inf))
         if not isinstance(v, bool) and not lo <= v <= hi:
-            unit = f.metadata.get("unit", "")
+            unit = f.metadata.get("unit", "").strip("1")
             raise BearingParameterError(f.name, v, f"outside its range [{lo:g}, {hi:g}] {unit}".rstrip())
     if p.n_balls < 3:
         raise BearingParameterError("n_balls", p.n_balls, "a ball bearing needs at least 3 balls")

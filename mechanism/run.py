@@ -37,7 +37,7 @@ MODES = ("cosim", "inprocess", "monolithic")
 FMU_NAMES = {"bearing": "BallBearing", "clearance": "JournalClearance"}
 
 
-#: documented ranges of RunConfig's numbers (docs/architecture.md, "Input ranges"): name -> (min, max, unit).
+#: documented ranges of RunConfig's numbers (docs/robustness.md): name -> (min, max, unit).
 #: Beyond them a run is meaningless (a step of 1e300 s) or numerically absurd, so they are errors.
 RANGES = {
     "rpm": (1e-3, 1e5, "rpm"),
