@@ -124,6 +124,12 @@ class HostLogger:
     regardless (the Modelica reference FMUs always log errors), which is what a host needs to learn why
     fmi2Instantiate or fmi2ExitInitializationMode failed; so errors go straight to the host's callback.
 
+    fmpy hosts: fmpy's loggers go through one native proxy that forwards to the Python callback most recently
+    registered with ``fmpy.logging.addLoggerProxy`` (a single global), which dangles once that callback is
+    garbage collected. So a host using fmpy's default callbacks gets fmpy's own ``printLogMessage`` called
+    directly (what the default would do), and a host with its own callbacks behind fmpy's proxy gets the
+    message through pythonfmu's queue only (``available`` False), as before: never the possibly dangling proxy.
+
     The slave receives the address of pythonfmu's C++ ``Fmi2Logger`` as the ``logger`` keyword. Its layout in
     pythonfmu 0.7's Linux x86-64 binary (libstdc++): vtable pointer, ``bool debugLogging_``, ``std::string
     instanceName_`` at byte 16 (data pointer, length, 16-byte local buffer), ``std::vector categories_`` at 48,
@@ -149,9 +155,17 @@ class HostLogger:
             callbacks = (ctypes.c_void_p * 5).from_address(words[9])   # fmi2CallbackFunctions
             if not callbacks[0]:
                 return
-            self._call = _LOGGER_TYPE(callbacks[0])
             self._environment, self._name = callbacks[4], name
-        except (TypeError, ValueError, OSError):
+            fmpy = sys.modules.get("fmpy.fmi2")
+            if fmpy is not None and hasattr(fmpy, "defaultCallbacks"):
+                if words[9] == ctypes.addressof(fmpy.defaultCallbacks):   # fmpy's defaults: its printer
+                    printer = getattr(sys.modules.get("fmpy.fmi1"), "printLogMessage", None)
+                    self._call = partial(_call_python, printer) if callable(printer) else None
+                    return
+                if callbacks[0] == ctypes.cast(fmpy.defaultCallbacks.logger, ctypes.c_void_p).value:
+                    return                                                # fmpy's proxy: may dangle
+            self._call = partial(_call_native, _LOGGER_TYPE(callbacks[0]))
+        except (TypeError, ValueError, OSError, AttributeError):
             self._call = None
 
     @property
@@ -163,12 +177,21 @@ class HostLogger:
         if self._call is None:
             return False
         category = category or STATUS_CATEGORIES.get(int(status), "logAll")
-        text = str(message).replace("%", "%%").encode("utf-8", "replace")   # the message is a printf format
         try:
-            self._call(self._environment, self._name, int(status), category.encode(), text)
+            self._call(self._environment, self._name, int(status), category.encode(), str(message))
         except Exception:   # never let a logging problem fail the FMU
             return False
         return True
+
+
+def _call_native(function, environment, name, status, category, message):
+    """An fmi2CallbackLogger: the message is a printf format, so '%' is escaped (no variadic arguments)."""
+    function(environment, name, status, category, message.replace("%", "%%").encode("utf-8", "replace"))
+
+
+def _call_python(printer, environment, name, status, category, message):
+    """fmpy's printLogMessage, which takes the formatted message."""
+    printer(environment, name, status, category, message.encode("utf-8", "replace"))
 
 
 # --- sealed modules: leave sys.path and sys.modules as the FMU found them -----------------------------
