@@ -105,9 +105,16 @@ def cmd_run(args) -> int:
 SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.ssp.cli")
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with a one-line error (the usage is one --help away)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     import importlib
-    parser = argparse.ArgumentParser(prog="python -m mechanism", description=__doc__)
+    parser = Parser(prog="python -m mechanism", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="simulate the paper's slider-crank once and write CSV, JSON and PNG")
     add_run_arguments(p)

@@ -134,7 +134,14 @@ def validate_schema(path: Path, schema: str, shown: str | Path | None = None) ->
         raise SspError(shown, "XML", f"not well-formed: {err}") from None
     xsd = etree.XMLSchema(file=str(_schema_dir() / schema))
     if not xsd.validate(doc):
-        problems = "; ".join(f"line {e.line}: {e.message}" for e in list(xsd.error_log)[:3])
+        # name the element a violation lies in (Parameter 'n_balls', Component 'bearing', ...)
+        named = [(el.sourceline, f"{etree.QName(el).localname} {el.get('name')!r}")
+                 for el in doc.iter() if isinstance(el.tag, str) and el.get("name") is not None]
+
+        def where(line):
+            inside = [label for start, label in named if start is not None and start <= line]
+            return f" ({inside[-1]})" if inside else ""
+        problems = "; ".join(f"line {e.line}{where(e.line)}: {e.message}" for e in list(xsd.error_log)[:3])
         raise SspError(shown, f"schema {schema}", f"does not validate: {problems}")
 
 
