@@ -129,7 +129,7 @@ def state_cases(rng: random.Random, n: int, variables: dict) -> list[dict]:
         elif pick == 8:
             blob = {"mutate": "set", "key": rng.choice(["youngs_modulus", "contact_stiffness", "ball_diameter",
                                                         "poisson_ratio", "radial_clearance"]),
-                    "value": rng.choice([-1.0, 0.0, 1e300, -1e300])}
+                    "value": rng.choice([-1.0, 123.0, 1e300, -1e300])}
         else:
             blob = {"mutate": "set", "key": rng.choice(["loaded_balls", "damping_model"]),
                     "value": rng.choice([-1, 10**6, 3.5, "2"])}
