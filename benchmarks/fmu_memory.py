@@ -3,7 +3,8 @@
     python benchmarks/fmu_memory.py [--fmu dist/BallBearing.fmu] [--instances 1000] [--loads 200]
 
 * instantiate/free: one fmpy ``FMU2Slave`` (one loaded binary), ``instantiate``, initialise, a few
-  ``doStep``s, ``terminate``, ``freeInstance`` -- repeated;
+  ``doStep``s, ``terminate``, ``fmi2FreeInstance`` -- repeated (fmpy's ``freeInstance()`` would also
+  unload the library);
 * load/unload: a new ``FmuEndpoint`` each cycle (reads the FMU, loads its binary, instantiates,
   initialises, steps, closes) -- what a study or a service that runs many cases in one process does.
 
@@ -53,7 +54,7 @@ def instantiate_free(fmu: Path, cycles: int, warmup: int = 20) -> tuple[float, f
             slave.doStep(k * 1e-5, 1e-5)
         slave.getReal([vr["F_x"], vr["F_y"]])
         slave.terminate()
-        slave.freeInstance()
+        slave.fmi2FreeInstance(slave.component)   # fmpy's freeInstance() would also unload the library
 
     for _ in range(warmup):
         cycle()

@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SEED = int(os.environ.get("FUZZ_SEED", "14"))
 BATCH = 150
 #: number of cases per category (>= 1,000 in all)
-COUNTS = {"parameter": 260, "input": 260, "state": 260, "ssp": 140, "cli": 120}
+COUNTS = {"parameter": 240, "input": 220, "state": 220, "crank_state": 120, "ssp": 110, "cli": 120}
 INPUTS = ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")
 GOOD_INPUTS = (1.2e-5, -0.4e-5, 1e-3, 0.0, 125.0, 0.0)
 BAD_REALS = (math.nan, math.inf, -math.inf, 1e300, -1e300)
@@ -138,6 +138,29 @@ def state_cases(rng: random.Random, n: int, variables: dict) -> list[dict]:
     return cases
 
 
+def crank_state_cases(rng: random.Random, n: int) -> list[dict]:
+    """SliderCrank states with a bad mechanism state, history or published outputs, or injected keys."""
+    bad_rows = [None, 1, "x", [[1.0, 2.0]], [[math.nan] * 4], [["a"] * 4], [[0.0] * 4] * 3, [[1e308] * 3]]
+    cases = []
+    while len(cases) < n:
+        pick = rng.randrange(6)
+        if pick == 0:
+            mutation = {"key": "_y", "value": rng.choice([None, [], [0.0], "y", [[0.0]], {"a": 1}, "nan", "long"])}
+        elif pick == 1:
+            mutation = {"key": "_history", "value": rng.choice(bad_rows + ["long", "nan"])}
+        elif pick == 2:
+            mutation = {"key": "_published", "value": rng.choice(bad_rows)}
+        elif pick == 3:
+            mutation = {"key": rng.choice(["_system", "_scheme", "_n", "__class__", "extra"]), "value": 1}
+        elif pick == 4:
+            mutation = {"key": rng.choice(["rpm", "crank_length", "max_substeps", "force_lag_steps"]),
+                        "value": rng.choice([-1.0, 1e300, "1200", None, 7.5])}
+        else:
+            mutation = {"drop": rng.choice(["_y", "_history", "_published", "e_x", "rpm"])}
+        cases.append({"kind": "crank_state", **mutation})
+    return cases
+
+
 SSP_MUTATIONS = ("absolute_source", "dotdot_source", "absolute_ssv", "dotdot_ssv", "drop_connection",
                  "garbage_ssd", "drop_member", "integer_ssv", "huge_ssv", "nan_ssv", "not_zip", "uri_source")
 
@@ -184,7 +207,8 @@ def cli_cases(rng: random.Random, n: int) -> list[dict]:
 def generate(seed: int, variables: dict) -> list[dict]:
     rng = random.Random(seed)
     cases = (parameter_cases(rng, COUNTS["parameter"], variables) + input_cases(rng, COUNTS["input"])
-             + state_cases(rng, COUNTS["state"], variables) + ssp_cases(rng, COUNTS["ssp"])
+             + state_cases(rng, COUNTS["state"], variables) + crank_state_cases(rng, COUNTS["crank_state"])
+             + ssp_cases(rng, COUNTS["ssp"])
              + cli_cases(rng, COUNTS["cli"]))
     for i, case in enumerate(cases):
         case["id"] = i
@@ -236,7 +260,9 @@ class Worker:
         self.slave.setReal([self.var[n].valueReference for n in INPUTS], [float(x) for x in values])
 
     def free(self) -> None:
-        for call in (self.slave.terminate, self.slave.freeInstance):
+        # fmi2FreeInstance itself: fmpy's freeInstance() also unloads the library, which this one object
+        # keeps using for the next instance
+        for call in (self.slave.terminate, lambda: self.slave.fmi2FreeInstance(self.slave.component)):
             try:
                 call()
             except Exception:
@@ -287,6 +313,66 @@ class Worker:
                                   lambda: self.slave.doStep(1e-5, case["step"])], messages, case["expect"])
         finally:
             self.free()
+
+    def case_crank_state(self, case):
+        """A SliderCrank instance (extracted from the archive), initialised and stepped once, then a bad state."""
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+        if not hasattr(self, "crank"):
+            folder = self.tmp / f"crank_{os.getpid()}"
+            with zipfile.ZipFile(self.ssp) as z:
+                z.extract("resources/SliderCrank.fmu", folder)
+            fmu = folder / "resources" / "SliderCrank.fmu"
+            md = read_model_description(str(fmu))
+            self.crank = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(fmu), str(folder / "x")),
+                                   modelIdentifier=md.coSimulation.modelIdentifier, instanceName="crank")
+            self.crank_vr = {v.name: v.valueReference for v in md.modelVariables}
+        slave, saved = self.slave, self.var
+        self.slave, self.var = self.crank, None
+        try:
+            messages = self.instance()
+            slave_vr = self.crank_vr
+            self.slave.exitInitializationMode()
+            self.slave.doStep(0.0, 1e-5)
+            good = self.slave.getFMUstate()
+            state = json.loads(bytes(self.slave.serializeFMUstate(good)).decode())
+            self.slave.freeFMUState(good)
+            if "drop" in case:
+                state.pop(case["drop"])
+            else:
+                value = case["value"]
+                if value == "long":
+                    value = [[0.0] * len(state["_history"][0])] * 50 if case["key"] == "_history" else [0.0] * 99
+                elif value == "nan":
+                    value = [[math.nan] * len(row) for row in state["_history"]] if case["key"] == "_history" \
+                        else [math.nan] * len(state["_y"])
+                state[case["key"]] = value
+            data = json.dumps(state).encode()
+            probe = [slave_vr["e_x"], slave_vr["slider_x"]]
+            before = self.slave.getReal(probe)
+
+            def restore():
+                bad = self.slave.deSerializeFMUstate(data)
+                self.slave.setFMUState(bad)
+                self.slave.freeFMUState(bad)
+            from fmpy.fmi1 import FMICallException
+            refused = False
+            for call in (restore, lambda: self.slave.doStep(1e-5, 1e-5)):
+                try:
+                    call()
+                except FMICallException:
+                    refused = True
+                    break
+            after = self.slave.getReal(probe)
+            text = " | ".join(messages)
+            if not refused or "state" not in text.lower():
+                return False, f"not refused with a message: {text[:300]}"
+            if after != before:
+                return False, f"the instance changed although the state was refused: {before} -> {after}"
+            return True, text[:200]
+        finally:
+            self.free()
+            self.slave, self.var = slave, saved
 
     def case_state(self, case):
         messages = self.instance()
