@@ -19,6 +19,7 @@ rpm and gravity -> the slider-crank, the BallBearing FMU from the archive), so t
 from __future__ import annotations
 
 import csv
+import os
 import sys
 from pathlib import Path
 
@@ -89,15 +90,20 @@ def cmd_simulate(args) -> int:
 
 
 def _write_rows(out: Path, result: dict) -> None:
-    """The recorded outputs as CSV (time and RECORD columns), written atomically."""
-    from mechanism.output.results import atomic_open
+    """The recorded outputs as CSV (time and RECORD columns), written to a temporary name and renamed
+    when complete (``mechanism.output`` is above this package, so its ``atomic_open`` is not used here)."""
     out.parent.mkdir(parents=True, exist_ok=True)
     keys = ["time", *RECORD]
-    with atomic_open(out, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(keys)
-        for row in zip(*(result[k] for k in keys)):
-            w.writerow([repr(float(v)) for v in row])
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    try:
+        with tmp.open("w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(keys)
+            for row in zip(*(result[k] for k in keys)):
+                w.writerow([repr(float(v)) for v in row])
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def register(subparsers) -> None:
