@@ -20,8 +20,10 @@ standard library is imported here):
   C++ static destructors delete its Python-state object and then the library destructor,
   ``finalizePythonInterpreter``, deletes it again: a double free that corrupts the heap after the host has
   finished ("corrupted double-linked list", SIGABRT, at random; Linux). Calling the exported
-  ``finalizePythonInterpreter`` once from a Python ``atexit`` hook releases the object early and turns both
-  later calls into no-ops.
+  ``finalizePythonInterpreter`` once, early, releases the object and turns both later calls into no-ops.
+  The FMUs' loader library (``fmu_bearing/native/loader.c``, the FMU's binary since issue 13) does this
+  in every host from a C exit handler; this function only covers an FMU without the loader (pythonfmu's
+  binary alone), from a Python ``atexit`` hook.
 """
 import atexit
 import ctypes
@@ -90,6 +92,8 @@ def guard_pythonfmu_exit(resources) -> None:
     if threading.current_thread() is not threading.main_thread():
         return
     binaries = os.path.join(os.path.dirname(os.path.normpath(str(resources))), "binaries", "linux64")
+    if glob.glob(os.path.join(binaries, "*_pythonfmu.so")):
+        return  # the FMU's binary is the loader (fmu_bearing/native): it finalises at exit itself
     for path in glob.glob(os.path.join(binaries, "*.so")):
         if path in _EXIT_GUARDED:
             continue
