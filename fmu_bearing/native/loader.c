@@ -373,6 +373,17 @@ static int try_library(const char *path, char *report, size_t size) {
         appendf(report, size, "\n  %s: loaded, but it is not a CPython library (no Py_IsInitialized)", path);
         return 0;
     }
+#ifdef _WIN32
+    {   /* pythonfmu's DLL imports python3.dll (the stable ABI forwarder): load the one next to python3X.dll */
+        char dll[MAX_PATH];
+        DWORD n = GetModuleFileNameA(lib, dll, MAX_PATH);
+        char *slash = n > 0 && n < MAX_PATH ? strrchr(dll, '\\') : NULL;
+        if (slash != NULL && (size_t)(slash - dll) + 13 < MAX_PATH) {
+            strcpy(slash + 1, "python3.dll");
+            LoadLibraryExA(dll, NULL, LOAD_WITH_ALTERED_SEARCH_PATH);
+        }
+    }
+#endif
     return 1;
 }
 
