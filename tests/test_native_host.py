@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import ctypes.util
 import math
+import os
 import shutil
 import subprocess
+import sys
 import sysconfig
 import zipfile
 from concurrent.futures import ThreadPoolExecutor
@@ -21,6 +23,7 @@ import pytest
 
 from fmu_bearing.native.build import LoaderBuildError, glibc_requirement
 from fmu_bearing.native.host import clean_env, compile_host, reference_forces, run_host
+from test_ssp import slider_crank_fmu, ssp_archive  # noqa: F401  (session fixtures, for ecos on the SSP)
 
 N_STEPS = 1000
 
@@ -207,3 +210,85 @@ def test_loader_cross_builds_for_windows(ball_bearing_fmu):
             fh.flush()
             exports = subprocess.run([objdump, "-p", fh.name], capture_output=True, text=True).stdout
         assert "fmi2Instantiate" in exports and "fmi2DoStep" in exports
+
+
+# ----------------------------------------------------------------------------------------------
+# ecos: its command-line tool and its out-of-process proxyfmu are native hosts too
+# ----------------------------------------------------------------------------------------------
+def _ecos_binary(name: str, folder: Path) -> Path:
+    """ecospy's ``name`` executable copied to ``folder`` with its executable bit (the wheel drops it)."""
+    try:
+        import ecospy
+    except ImportError as err:
+        pytest.skip(f"ecospy is not installed ({err}); pip install '.[tools]'")
+    except OSError as err:
+        pytest.skip(f"ecospy's native library does not load ({err}); apt-get install libtbb12")
+    exe = Path(ecospy.__file__).parent / "binaries" / name
+    if not exe.is_file():
+        pytest.skip(f"ecospy ships no {name} executable at {exe}")
+    local = folder / name
+    shutil.copy(exe, local)
+    local.chmod(0o755)
+    return local
+
+
+def test_ecos_command_line_runs_the_ssp_without_setup(ssp_archive, tmp_path, need_libpython):
+    """The ecos executable (native) runs both FMUs of the SSP with a clean environment, in parallel mode."""
+    import csv
+    ecos = _ecos_binary("ecos", tmp_path)
+    proc = subprocess.run([str(ecos), "simulate", "--path", str(ssp_archive), "--stepSize", "1e-5",
+                           "--stopTime", "0.0005", "--parameterSet", "BB1B420205-600rpm", "-l", "info"],
+                          cwd=tmp_path, env=clean_env(), capture_output=True, text=True, timeout=300)
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 0, log[-3000:]
+    assert "Wrote CSV data" in log, log[-3000:]
+    with open(tmp_path / "SliderCrankBearing.csv", newline="") as fh:
+        rows = list(csv.reader(fh, skipinitialspace=True))
+    last = dict(zip([h.split("[")[0].strip() for h in rows[0]], rows[-1]))
+    assert float(last["mechanism::omega_outer"]) == pytest.approx(600 * 2 * math.pi / 60, rel=1e-6)
+    assert int(float(last["bearing::n_balls"])) == 8
+    assert abs(float(last["mechanism::e_x"])) > 0.0
+
+
+def test_ecos_proxyfmu_runs_the_fmu_out_of_process_without_setup(unzipdir, ball_bearing_fmu, tmp_path,
+                                                                  need_libpython):
+    """ecos's proxyfmu (a native process per instance) gives the forces fmpy gives, from a clean environment."""
+    proxy = _ecos_binary("proxyfmu", tmp_path)
+    script = tmp_path / "proxy_run.py"
+    script.write_text(
+        "import sys\n"
+        "from ecospy import EcosSimulation, EcosSimulationStructure\n"
+        "with EcosSimulationStructure() as ss:\n"
+        "    ss.add_model('bearing', 'proxyfmu://localhost?file=' + sys.argv[1])\n"
+        "    with EcosSimulation(structure=ss, step_size=1e-5) as sim:\n"
+        "        sim.init()\n"
+        "        for k in range(100):\n"
+        "            sim.set_real('bearing::e_x', 3e-5)\n"
+        "            sim.set_real('bearing::omega_inner', 100.0)\n"
+        "            sim.step(1)\n"
+        "        print('F', repr(sim.get_real('bearing::F_x')), repr(sim.get_real('bearing::F_y')))\n"
+        "        sim.terminate()\n", encoding="utf-8")
+    env = clean_env(PATH=os.pathsep.join([str(proxy.parent), os.environ.get("PATH", "")]))
+    proc = subprocess.run([sys.executable, str(script), str(ball_bearing_fmu)], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    assert "returned with status 0" in proc.stdout + proc.stderr  # the proxyfmu process exited cleanly
+    line = next(l for l in proc.stdout.splitlines() if l.startswith("F "))
+    got = [float(v) for v in line.split()[1:]]
+
+    from fmpy import read_model_description
+    from fmpy.fmi2 import FMU2Slave
+    md = read_model_description(str(unzipdir))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(unzipdir), modelIdentifier="BallBearing", instanceName="ref")
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    for k in range(100):
+        fmu.setReal([vr["e_x"], vr["omega_inner"]], [3e-5, 100.0])
+        fmu.doStep(k * 1e-5, 1e-5)
+    want = fmu.getReal([vr["F_x"], vr["F_y"]])
+    fmu.terminate()
+    fmu.freeInstance()
+    assert got == pytest.approx(want, rel=1e-13) and abs(want[0]) > 100.0
