@@ -17,10 +17,12 @@ Three things live here, all in plain data (no simulation):
   type, unit, the FMU's min/max, and the component's own validation). Every problem is an
   ``SspError`` naming the file, the element and the problem.
 
-Parameter sets follow the convention of libcosim and ecos: each component has one ParameterBinding
-per named set, whose .ssv file carries the set's name and every parameter of that component; a tool
-applies the bindings of the selected name (libcosim without a name: each component's first binding,
-which is the default set ``DEFAULT_PARAMETER_SET``).
+Parameter sets follow SSP 1.0, which applies every ParameterBinding of an element in order (a later
+one overriding an earlier one): the default SSD (``SystemStructure.ssd`` in the archive) binds ONE set per
+component, the default ``DEFAULT_PARAMETER_SET``; every other set is a variant SSD of the same archive,
+``<set name>.ssd`` beside it, identical but for its bindings. Each binding's .ssv carries the set's name and
+every parameter of that component, so a set is complete on its own and every conforming tool ends with the
+same values (``load_ssp(path, name)`` reads the variant).
 """
 from __future__ import annotations
 
@@ -52,6 +54,7 @@ SYSTEM_NAME = "SliderCrankBearing"
 SOURCE_SSD = SOURCE_DIR / f"{SYSTEM_NAME}.ssd"
 ARCHIVE_NAME = f"{SYSTEM_NAME}.ssp"
 SSD_IN_ARCHIVE = "SystemStructure.ssd"   # the default SSD of an SSP archive (SSP 1.0, 5.3)
+SSD_SUFFIX = ".ssd"                      # variant SSDs: <set name>.ssd beside it (SSP 1.0, 5.3: variants)
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 SSV_TYPE = "application/x-ssp-parameter-set"
 #: communication step of the SSD's default experiment (libcosim reads it from the OSP annotation) [s]
@@ -211,13 +214,22 @@ def ssv_text(spec: ParameterSetSpec, component: str) -> str:
     return _to_text(root)
 
 
-def ssd_text() -> str:
-    """The System Structure Description: components, connectors, connections, parameter bindings, units."""
+def variant_ssd_name(set_name: str) -> str:
+    """File name of the variant SSD of a parameter set (in the archive's root and in ssp/)."""
+    return f"{set_name}{SSD_SUFFIX}"
+
+
+def ssd_text(spec: ParameterSetSpec | None = None) -> str:
+    """The System Structure Description with ONE parameter binding per component, that of ``spec`` (default:
+    the default set): components, connectors, connections, parameter bindings, units."""
+    spec = spec or PARAMETER_SETS[0]
     definitions = unit_definitions()
+    variant = "" if spec.name == DEFAULT_PARAMETER_SET else f" Variant SSD of parameter set {spec.name}."
     root = ET.Element(_q("ssd", "SystemStructureDescription"), {
         "version": "1.0", "name": SYSTEM_NAME,
         "description": "Slider-crank (Xu et al. 2012, Table 1) with a deep-groove ball bearing with clearance "
-                       "(Table 2) as the crank-rod joint: two FMUs coupled through force and tangent matrices",
+                       "(Table 2) as the crank-rod joint: two FMUs coupled through force and tangent matrices. "
+                       f"Parameter set: {spec.name} ({spec.description}).{variant}",
         "generationTool": _GENERATED})
     system = ET.SubElement(root, _q("ssd", "System"), {"name": SYSTEM_NAME})
     elements = ET.SubElement(system, _q("ssd", "Elements"))
@@ -233,9 +245,8 @@ def ssd_text() -> str:
             if unit:
                 used.add(unit)
         bindings = ET.SubElement(comp, _q("ssd", "ParameterBindings"))
-        for spec in PARAMETER_SETS:
-            ET.SubElement(bindings, _q("ssd", "ParameterBinding"), {
-                "type": SSV_TYPE, "source": ssv_path(spec.name, component)})
+        ET.SubElement(bindings, _q("ssd", "ParameterBinding"), {
+            "type": SSV_TYPE, "source": ssv_path(spec.name, component)})
     connections = ET.SubElement(system, _q("ssd", "Connections"))
     for start, start_con, end, end_con in CONNECTIONS:
         ET.SubElement(connections, _q("ssd", "Connection"), {
@@ -251,8 +262,11 @@ def ssd_text() -> str:
 
 
 def expected_files() -> dict[str, str]:
-    """Every generated file of ssp/, relative path -> text (what ``generate`` writes)."""
+    """Every generated file of ssp/, relative path -> text (what ``generate`` writes): the default SSD, one
+    variant SSD per other parameter set, and the .ssv files."""
     files = {SOURCE_SSD.name: ssd_text()}
+    for spec in PARAMETER_SETS[1:]:
+        files[variant_ssd_name(spec.name)] = ssd_text(spec)
     for spec in PARAMETER_SETS:
         for component in COMPONENTS:
             files[ssv_path(spec.name, component)] = ssv_text(spec, component)
@@ -272,8 +286,9 @@ def generate(dest: str | Path = SOURCE_DIR) -> list[Path]:
 
 
 def pack(out: str | Path, fmus: dict[str, str | Path], source: str | Path = SOURCE_DIR) -> Path:
-    """Pack the SSD of ``source`` (as SystemStructure.ssd), its .ssv files and the FMUs (model name -> path)
-    into the archive ``out``; the archive is checked with ``load_ssp`` before it replaces ``out``."""
+    """Pack the SSD of ``source`` (as SystemStructure.ssd), its variant SSDs (``<set>.ssd``), its .ssv files and
+    the FMUs (model name -> path) into the archive ``out``; the archive is checked with ``load_ssp`` (every
+    variant) before it replaces ``out``."""
     source, out = Path(source), Path(out)
     ssd = source / SOURCE_SSD.name
     if not ssd.is_file():
@@ -285,6 +300,9 @@ def pack(out: str | Path, fmus: dict[str, str | Path], source: str | Path = SOUR
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
         z.write(ssd, SSD_IN_ARCHIVE)
+        variants = sorted(p for p in source.glob(f"*{SSD_SUFFIX}") if p.name != ssd.name)
+        for variant in variants:
+            z.write(variant, variant.name)
         for ssv in sorted((source / "resources").rglob("*.ssv")):
             z.write(ssv, ssv.relative_to(source).as_posix())
         for model, path in sorted(fmus.items()):
@@ -292,6 +310,9 @@ def pack(out: str | Path, fmus: dict[str, str | Path], source: str | Path = SOUR
     try:
         with load_ssp(tmp):
             pass
+        for variant in variants:
+            with load_ssp(tmp, variant.name[:-len(SSD_SUFFIX)]):
+                pass
     except Exception:
         tmp.unlink(missing_ok=True)
         raise
@@ -344,12 +365,14 @@ class Component:
     variables: dict[str, FmuVariable]
     parameter_sets: dict[str, dict[str, object]]     # set name -> {parameter: value}, in binding order
     parameter_files: dict[str, str]                  # set name -> .ssv path relative to the SSD
+    values: dict[str, object] = field(default_factory=dict)  # every binding applied in order (SSP 1.0)
 
 
 @dataclass
 class SspSystem:
-    """A checked SSP: components, connections and parameter sets. Close it (or use ``with``) to
-    remove the folder an archive was unpacked into."""
+    """A checked SSP: components, connections and the parameter set of the SSD read (the default SSD or a
+    variant). ``parameter_set_names``: that set first, then the archive's other sets. Close it (or use
+    ``with``) to remove the folder an archive was unpacked into."""
 
     file: Path
     name: str
@@ -359,6 +382,7 @@ class SspSystem:
     step_size: float | None
     stop_time: float | None
     workdir: Path | None = None
+    ssd: str = SSD_IN_ARCHIVE           # the SSD read, relative to the archive (or its folder)
 
     def component_of_model(self, model_name: str) -> Component:
         for c in self.components.values():
@@ -368,24 +392,23 @@ class SspSystem:
                                               f"(components: {', '.join(f'{c.name} ({c.model_name})' for c in self.components.values())})")
 
     def parameters(self, set_name: str | None = None) -> dict[str, dict[str, object]]:
-        """component -> {parameter: value} of the named set (default: the first binding of each component)."""
-        name = self.check_parameter_set(set_name)
-        return {c.name: dict(c.parameter_sets.get(name, {})) for c in self.components.values()}
+        """component -> {parameter: value}: every binding of the SSD read applied in order (SSP 1.0).
+        ``set_name``, if given, must be the set of that SSD (``check_parameter_set``)."""
+        self.check_parameter_set(set_name)
+        return {c.name: dict(c.values) for c in self.components.values()}
 
     def check_parameter_set(self, set_name: str | None) -> str:
-        """The set's name (the default for None); an SspError if a component does not bind it."""
-        if set_name is None:
-            if not self.parameter_set_names:
-                raise SspError(self.file, "ParameterBindings", "the system binds no parameter set")
-            return self.parameter_set_names[0]
-        for c in self.components.values():
-            if c.parameter_sets and set_name not in c.parameter_sets:
-                raise SspError(self.file, f"ParameterBindings of component '{c.name}'",
-                               f"no parameter set named {set_name!r} (sets: {', '.join(c.parameter_sets)})")
-        if set_name not in self.parameter_set_names:
-            raise SspError(self.file, "ParameterBindings", f"no parameter set named {set_name!r} "
-                                                           f"(sets: {', '.join(self.parameter_set_names)})")
-        return set_name
+        """The name of the SSD's parameter set (``set_name`` or None); an SspError naming the sets otherwise."""
+        if not self.parameter_set_names:
+            raise SspError(self.file, "ParameterBindings", "the system binds no parameter set")
+        active = self.parameter_set_names[0]
+        if set_name is None or set_name == active:
+            return active
+        if set_name in self.parameter_set_names:
+            raise SspError(self.file, self.ssd, f"binds parameter set {active!r}, not {set_name!r}: "
+                                                f"read the variant with load_ssp(path, {set_name!r})")
+        raise SspError(self.file, "ParameterBindings", f"no parameter set named {set_name!r} "
+                                                       f"(sets: {', '.join(self.parameter_set_names)})")
 
     def close(self) -> None:
         if self.workdir is not None:
@@ -522,14 +545,15 @@ def check_component_parameters(shown: str, component: Component, values: dict) -
 def load_ssp(path: str | Path, parameter_set: str | None = None) -> SspSystem:
     """Read and check an .ssp archive (or an .ssd whose resources lie beside it) before any simulation.
 
-    ``parameter_set``: if given, it must be bound to every component. Raises SspError naming the file,
-    the element and the problem.
+    ``parameter_set``: None or the default set reads the default SSD (``SystemStructure.ssd``, or the .ssd
+    given); another name reads the variant ``<name>.ssd`` beside it. Raises SspError naming the file, the
+    element and the problem (an unknown set: the sets there are).
     """
     path = Path(path)
     if not path.exists():
         raise SspError(path, "file", "not found")
     workdir = None
-    if path.suffix.lower() == ".ssd":
+    if path.suffix.lower() == SSD_SUFFIX:
         ssd, base, shown = path, path.parent, lambda rel: path.parent / rel
     else:
         if not zipfile.is_zipfile(path):
@@ -547,6 +571,10 @@ def load_ssp(path: str | Path, parameter_set: str | None = None) -> SspSystem:
             z.extractall(workdir)
         ssd, base = workdir / SSD_IN_ARCHIVE, workdir
         shown = lambda rel: f"{path}!/{PurePosixPath(rel)}"  # noqa: E731
+    if parameter_set is not None:
+        variant = base / variant_ssd_name(parameter_set)
+        if variant.is_file() and variant.resolve() != ssd.resolve():
+            ssd = variant
     try:
         return _load(path, ssd, base, shown, workdir, parameter_set)
     except BaseException:
@@ -607,6 +635,7 @@ def _load(path, ssd, base, shown, workdir, parameter_set) -> SspSystem:
             check_component_parameters(str(shown(src)), comp, values)
             comp.parameter_sets[set_name] = values
             comp.parameter_files[set_name] = src
+            comp.values.update(values)   # SSP 1.0: every binding is applied, in order
     connections = []
     inputs_connected: dict[tuple[str, str], Connection] = {}
     for c in _children(system, "ssd:Connections/ssd:Connection"):
@@ -640,11 +669,15 @@ def _load(path, ssd, base, shown, workdir, parameter_set) -> SspSystem:
             raise SspError(ssd_shown, element, f"input {key[0]}.{key[1]} is already connected")
         inputs_connected[key] = con
         connections.append(con)
-    names: list[str] = []
-    for comp in components.values():
-        for set_name in comp.parameter_sets:
-            if set_name not in names:
-                names.append(set_name)
+    last = {c.name: list(c.parameter_sets)[-1] for c in components.values() if c.parameter_sets}
+    if len(set(last.values())) > 1:
+        raise SspError(ssd_shown, "ParameterBindings", "the components end with different parameter sets "
+                       f"({', '.join(f'{k}: {v}' for k, v in last.items())}); bind one set per SSD and put "
+                       "the others into variant SSDs")
+    names = list(dict.fromkeys(last.values()))
+    for other in _other_ssds(base, ssd):
+        if other not in names:
+            names.append(other)
     step = stop = None
     experiment = root.find(_q("ssd", "DefaultExperiment"))
     if experiment is not None:
@@ -652,7 +685,28 @@ def _load(path, ssd, base, shown, workdir, parameter_set) -> SspSystem:
         fixed = experiment.find(f".//{_q('osp', 'FixedStepAlgorithm')}")
         if fixed is not None and fixed.get("baseStepSize"):
             step = float(fixed.get("baseStepSize"))
-    result = SspSystem(Path(path), system.get("name"), components, connections, names, step, stop, workdir)
+    result = SspSystem(Path(path), system.get("name"), components, connections, names, step, stop, workdir,
+                       ssd.relative_to(base).as_posix())
     if parameter_set is not None:
         result.check_parameter_set(parameter_set)
     return result
+
+
+def _other_ssds(base: Path, ssd: Path) -> list[str]:
+    """Names of the parameter sets of the other SSDs beside ``ssd``: a variant's is its file name, the
+    default SSD's (SystemStructure.ssd, or ssp/'s source SSD) that of its first binding's .ssv."""
+    names = []
+    for other in sorted(base.glob(f"*{SSD_SUFFIX}")):
+        if other.resolve() == ssd.resolve():
+            continue
+        if other.name not in (SSD_IN_ARCHIVE, SOURCE_SSD.name):
+            names.append(other.name[:-len(SSD_SUFFIX)])
+            continue
+        try:
+            binding = ET.parse(other).getroot().find(f".//{_q('ssd', 'ParameterBinding')}")
+            source = binding.get("source") if binding is not None else None
+            if source and (base / source).is_file():
+                names.insert(0, ET.parse(base / source).getroot().get("name"))
+        except ET.ParseError:
+            pass  # the default SSD is checked when it is read
+    return [n for n in names if n]

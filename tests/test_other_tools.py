@@ -134,7 +134,8 @@ def test_tools_agree_with_our_master_on_the_same_ssp(results, tool):
 
 
 def test_named_parameter_set_reaches_the_fmus_in_ecos_and_libcosim(ssp_archive):
-    """ecos applies the SSP's named set; libcosim gets the same values as initial values: same run."""
+    """A named set is a variant SSD: libcosim reads the variant .ssd, ecos the unpacked archive with the
+    variant as its SystemStructure.ssd (and the set named): same run, not the default 8 balls."""
     _need("libcosim")
     _need("ecos")
     name = "BB1B420205-15balls-1200rpm"
