@@ -29,7 +29,6 @@ class by a regular expression on its source lines (the first class statement der
 no other line may look like one; it uses absolute imports only and no ``from __future__`` import.
 """
 import ctypes
-import math
 from dataclasses import fields
 
 from pythonfmu3 import (Boolean, DefaultExperiment, Dimension, Fmi3Causality, Fmi3Initial, Fmi3Slave,
@@ -39,6 +38,7 @@ from fmu_bearing import ball_bearing as physics
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
 from fmu_bearing.parameters import BearingParameters
 from fmu_bearing.slaves import UNIT_DEFINITIONS, hold_before_raise
+from fmu_bearing.slaves.stepping import BearingStepping
 
 #: outputs in the order of physics.BearingForce, (name, unit, description); unit None: Int32
 FORCE_OUTPUTS = COUPLING_OUTPUTS + (
@@ -125,7 +125,7 @@ def unit_definitions(names):
     return units
 
 
-class BallBearing3(Fmi3Slave):
+class BallBearing3(Fmi3Slave, BearingStepping):
     """Deep-groove ball bearing with radial clearance (Xu et al. 2012), FMI 3.0 co-simulation."""
 
     def __init__(self, **kwargs):
@@ -142,7 +142,7 @@ class BallBearing3(Fmi3Slave):
         self._pending_error = None     # a refused call, reported by the next doStep
         self._param_names = tuple(f.name for f in fields(BearingParameters))
         defaults = BearingParameters()
-        self._loads = [0.0] * int(defaults.n_balls)    # ball_loads: always n_balls long
+        self._resize_loads(int(defaults.n_balls))      # ball_loads: always n_balls long
         units = set()
 
         cont, fixed, discrete = Fmi3Variability.continuous, Fmi3Variability.fixed, Fmi3Variability.discrete
@@ -215,7 +215,13 @@ class BallBearing3(Fmi3Slave):
         return list(self._loads)
 
     def _set_loads(self, values):  # FMU state only (outputs cannot be set through the FMI API)
-        self._loads = [float(x) for x in values]
+        self._resize_loads(len(values))
+        self._loads[:] = [float(x) for x in values]
+
+    def _resize_loads(self, n):
+        """ball_loads and the buffer evaluate() writes into, n_balls long (empty for an invalid n_balls)."""
+        n = n if 0 <= n <= MAX_BALLS else 0
+        self._loads, self._scratch = [0.0] * n, [0.0] * n
 
     # --- FMI ----------------------------------------------------------------------------------
     def parameters(self) -> BearingParameters:
@@ -240,43 +246,12 @@ class BallBearing3(Fmi3Slave):
         self._set = {vr: v.setter for vr, v in self.vars.items() if v.causality == Fmi3Causality.input}
 
     def do_step(self, current_time, step_size):
-        bearing = self._bearing
-        if bearing is None or self._pending_error is not None:
-            reason = self._pending_error or "the instance is not initialised"
-            self._pending_error = None
-            return self._refuse_step(current_time, reason)
-        w_i, w_o = self.omega_inner, self.omega_outer
-        try:
-            bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, w_i, w_o)
-        except physics.BearingInputError as err:
-            return self._refuse_step(current_time, err)
-        if not step_size >= 0.0:
-            return self._refuse_step(current_time, f"step size {step_size!r} is not >= 0")
-        message = self._evaluate(bearing.advance_cage(self.cage_angle, w_i, w_o, step_size), bearing)
-        if message is not None:
-            return self._refuse_step(current_time, message)
+        reason = self._advance(step_size)  # BearingStepping: check inputs, advance the cage, evaluate
+        if reason is not None:
+            self._error(f"doStep at t = {current_time!r} s refused: {reason}")
+            return Fmi3StepResult(status=Fmi3Status.discard)  # the outputs keep the values of the last good step
         self.time = current_time + step_size
         return Fmi3StepResult()
-
-    def _refuse_step(self, current_time, reason):
-        self._error(f"doStep at t = {current_time!r} s refused: {reason}")
-        return Fmi3StepResult(status=Fmi3Status.discard)  # the outputs keep the values of the last good step
-
-    def _evaluate(self, cage_angle, bearing):
-        """Outputs at ``cage_angle`` and the held inputs; on failure return a message and change nothing."""
-        loads = [0.0] * bearing.n_balls
-        try:
-            r = bearing.evaluate(self.e_x, self.e_y, self.v_x, self.v_y, cage_angle,
-                                 self.omega_inner, self.omega_outer, loads)
-        except Exception as err:  # never let an exception reach pythonfmu3's C++ side
-            return f"force law failed: {err!r}"
-        if not math.isfinite(r[0] + r[1] + r[2] + r[3] + r[4] + r[5] + r[6] + r[7] + r[9] + cage_angle):
-            return f"non-finite force law result {tuple(r)} (inputs out of any physical range)"
-        (self.F_x, self.F_y, self.stiffness_xx, self.stiffness_xy, self.stiffness_yy,
-         self.damping_xx, self.damping_xy, self.damping_yy, self.loaded_balls, self.max_ball_load) = r
-        self.cage_angle = cage_angle
-        self._loads = loads
-        return None
 
     def _error(self, message):
         self.log(str(message), Fmi3Status.error)
@@ -334,9 +309,8 @@ class BallBearing3(Fmi3Slave):
             if kinds.get(vr) != kind or vr not in put:
                 self._refuse(vr, kind)
             elif vr == self._n_balls_vr:
-                n = convert(value)
-                self.n_balls = n
-                self._loads = [0.0] * n if 0 <= n <= MAX_BALLS else []  # invalid: refused at initialisation
+                self.n_balls = convert(value)
+                self._resize_loads(self.n_balls)  # an invalid n_balls is refused at initialisation
             else:
                 put[vr](convert(value))
 
@@ -383,8 +357,9 @@ class BallBearing3(Fmi3Slave):
             self._pending_error = self._pending_error or message
             return
         for name, value in values.items():
-            setattr(self, name, value)
-        self._loads = values["ball_loads"]
+            if name != "ball_loads":
+                setattr(self, name, value)
+        self._set_loads(values["ball_loads"])
         self._bearing = bearing
         self._set = {vr: v.setter for vr, v in self.vars.items()
                      if v.causality == Fmi3Causality.input or bearing is None and v.causality in
