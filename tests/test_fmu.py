@@ -499,7 +499,10 @@ def test_fmu_runs_without_the_project_installed(fmu, tmp_path):
 def test_fmu_packs_the_package_and_build_options(fmu):
     with zipfile.ZipFile(fmu.path) as z:
         names = set(z.namelist())
-        assert json.loads(z.read("resources/build_options.json")) == {"max_balls": 20}
+        import build_fmu
+        assert json.loads(z.read("resources/build_options.json")) == {
+            "max_balls": 20, "sources_sha256": build_fmu.source_digest(next(s for s in build_fmu.REGISTRY
+                                                                              if s.name == "BallBearing"))}
     for required in ("resources/ball_bearing_fmu.py", "resources/fmu_bearing/__init__.py",
                      "resources/fmu_bearing/ball_bearing.py", "resources/fmu_bearing/hertz.py",
                      "resources/fmu_bearing/parameters.py", "resources/pythonfmu/fmi2slave.py",

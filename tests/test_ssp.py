@@ -16,9 +16,11 @@ import pytest
 import build_fmu
 from conftest import built_fmu
 from fmu_bearing.parameters import BearingParameters
-from mechanism import ssp_model as sm
-from mechanism import ssp_run
-from mechanism.slider_crank import SliderCrankParameters
+from mechanism import ssp as sm
+from mechanism.ssp import config as ssp_config
+from mechanism.ssp import tools as ssp_tools
+from mechanism.ssp.system import NS, SSV_TYPE
+from mechanism.systems.slider_crank import SliderCrankParameters
 
 H = 1e-5
 T_SHORT = 0.002       # s: 200 steps, for the quick checks
@@ -75,8 +77,8 @@ def _bindings(ssd_text: str) -> dict[str, list[str]]:
     """component -> the .ssv sources of its ParameterBindings, in order."""
     import xml.etree.ElementTree as ET
     root = ET.fromstring(ssd_text.encode())
-    return {c.get("name"): [b.get("source") for b in c.findall("ssd:ParameterBindings/ssd:ParameterBinding", sm.NS)]
-            for c in root.findall("ssd:System/ssd:Elements/ssd:Component", sm.NS)}
+    return {c.get("name"): [b.get("source") for b in c.findall("ssd:ParameterBindings/ssd:ParameterBinding", NS)]
+            for c in root.findall("ssd:System/ssd:Elements/ssd:Component", NS)}
 
 
 def test_default_ssd_binds_one_set_per_component_and_variant_ssds_the_others(ssp_archive):
@@ -104,7 +106,7 @@ def test_several_bindings_are_applied_in_order_the_last_set_wins(ssp_archive, tm
     """The SSP 1.0 reading of an SSD with every set bound to each component (this project's SSD until
     issue 13): all bindings applied in order, so the last set's values."""
     def all_bindings(text):
-        sources = "".join(f'<ssd:ParameterBinding type="{sm.SSV_TYPE}" source="{sm.ssv_path(s.name, "{c}")}" />'
+        sources = "".join(f'<ssd:ParameterBinding type="{SSV_TYPE}" source="{sm.ssv_path(s.name, "{c}")}" />'
                           for s in sm.PARAMETER_SETS)
         return re.sub(r'(<ssd:Component name="(\w+)".*?<ssd:ParameterBindings>).*?(</ssd:ParameterBindings>)',
                       lambda m: m.group(1) + sources.replace("{c}", m.group(2)) + m.group(3), text, flags=re.S)
@@ -256,9 +258,9 @@ def test_bad_ssp_stops_the_tools_and_the_master_before_any_simulation(ssp_archiv
     import fmpy.ssp.simulation
     monkeypatch.setattr(fmpy.ssp.simulation, "simulate_ssp", lambda *a, **k: pytest.fail("simulation started"))
     with pytest.raises(sm.SspError, match="unit mismatch"):
-        ssp_run.simulate_with("fmpy", bad)
+        ssp_tools.simulate_with("fmpy", bad)
     with pytest.raises(sm.SspError, match="unit mismatch"):
-        ssp_run.config_from_ssp(bad)
+        ssp_config.config_from_ssp(bad)
 
 
 def test_unknown_parameter_set_and_non_archive_are_rejected(ssp_archive, tmp_path):
@@ -283,28 +285,28 @@ def _run_args(*argv):
     from mechanism.cli import add_run_arguments
     parser = argparse.ArgumentParser()
     add_run_arguments(parser)
-    ssp_run.add_ssp_arguments(parser)
+    ssp_config.add_ssp_arguments(parser)
     return parser.parse_args(list(argv))
 
 
 def test_run_ssp_maps_the_parameter_set_onto_run_config(ssp_archive):
     args = _run_args("--ssp", str(ssp_archive), "--parameter-set", "BB1B420205-20balls-1200rpm",
                      "--revs", "0.01", "--quiet")
-    config = ssp_run.config_from_ssp_args(args)
+    config = ssp_config.config_from_ssp_args(args)
     assert config.rpm == 1200.0 and config.joint == "bearing" and config.revs == 0.01
     assert config.settings == BearingParameters(n_balls=20, allow_ball_overlap=True).as_dict()
     assert Path(config.fmu).is_file() and Path(config.fmu).name == "BallBearing.fmu"
-    config600, system = ssp_run.config_from_ssp(ssp_archive, "BB1B420205-600rpm")
+    config600, system = ssp_config.config_from_ssp(ssp_archive, "BB1B420205-600rpm")
     system.close()
     assert config600.rpm == 600.0
     with pytest.raises(ValueError, match="drop --rpm, --set"):
-        ssp_run.config_from_ssp_args(_run_args("--ssp", str(ssp_archive), "--rpm", "600", "--set", "n_balls=9"))
+        ssp_config.config_from_ssp_args(_run_args("--ssp", str(ssp_archive), "--rpm", "600", "--set", "n_balls=9"))
 
 
 def test_run_ssp_refuses_slider_crank_values_run_config_cannot_carry(ssp_archive, tmp_path):
     bad = _edit(ssp_archive, tmp_path, MECH_SSV, edit=_param("crank_length", "Real", 0.05, 0.06))
     with pytest.raises(sm.SspError, match="Parameter 'crank_length'.*RunConfig carries rpm and gravity only"):
-        ssp_run.config_from_ssp(bad)
+        ssp_config.config_from_ssp(bad)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -326,7 +328,7 @@ def test_slider_crank_fmu_is_valid_and_declares_the_interface(slider_crank_fmu):
     assert float(v["crank_mass"].start) == SliderCrankParameters().crank_mass
     with zipfile.ZipFile(slider_crank_fmu) as z:
         names = z.namelist()
-    assert "resources/mechanism/solver.py" in names and "resources/slider_crank_fmu.py" in names
+    assert "resources/mechanism/multibody/solver.py" in names and "resources/slider_crank_fmu.py" in names
 
 
 class _Pair:
@@ -389,7 +391,7 @@ def test_slider_crank_fmu_with_gauss_seidel_ordering_reproduces_our_master(ssp_a
     """force_lag_steps = 0 and a Gauss-Seidel loop: the two-FMU system is our master's jacobian-drift
     co-simulation, to rounding (the same core, the same BallBearing FMU)."""
     from mechanism.run import run
-    config, system = ssp_run.config_from_ssp(ssp_archive, revs=T_SHORT * 20.0, progress=False)  # 0.04 rev = 2 ms
+    config, system = ssp_config.config_from_ssp(ssp_archive, revs=T_SHORT * 20.0, progress=False)  # 0.04 rev = 2 ms
     try:
         ref = run(config)
         pair = _Pair(system.components["mechanism"].fmu, system.components["bearing"].fmu, {"force_lag_steps": 0})
@@ -425,7 +427,7 @@ def test_slider_crank_fmu_state_round_trip(ssp_archive):
 def test_two_fmu_jacobi_is_stable_at_1e_5_with_the_tangent_inputs_and_not_without(ssp_archive, tmp_path):
     """fmpy.ssp (fixed-step Jacobi) at h = 1e-5 s, 0.2 rev at 1200 rpm: stable with the stiffness and
     damping connections; without them (zero-order hold) the eccentricity diverges within ~150 steps."""
-    result = ssp_run.simulate_with("fmpy", ssp_archive, step=H, t_end=0.01)
+    result = ssp_tools.simulate_with("fmpy", ssp_archive, step=H, t_end=0.01)
     e = np.hypot(result["mechanism.e_x"], result["mechanism.e_y"])
     assert np.all(np.isfinite(e)) and 20e-6 < e.max() < 45e-6      # monolithic reference: 30.6 µm
     tangent = ("stiffness_xx", "stiffness_xy", "stiffness_yy", "damping_xx", "damping_xy", "damping_yy")
@@ -480,7 +482,7 @@ def test_fmpy_libcosim_and_ecos_apply_the_same_parameter_set(ssp_archive, monkey
     """Each tool reads the set from the SSD itself (default: SystemStructure.ssd; a named set: its variant
     SSD): n_balls read back from the bearing instance, and the force after 30 steps at 1e-5 s, agree."""
     import fmpy.ssp.simulation as fmpy_sim
-    missing = {tool: _tool_missing(tool) for tool in ssp_run.TOOLS}
+    missing = {tool: _tool_missing(tool) for tool in ssp_tools.TOOLS}
     if any(missing.values()):
         pytest.skip("; ".join(r for r in missing.values() if r))
     read_back = {}
@@ -496,9 +498,9 @@ def test_fmpy_libcosim_and_ecos_apply_the_same_parameter_set(ssp_archive, monkey
     peak = {}
     for set_name, n_balls in ((None, 8), ("BB1B420205-15balls-1200rpm", 15)):
         runs = {}
-        for tool in ssp_run.TOOLS:
+        for tool in ssp_tools.TOOLS:
             extra = () if tool == "fmpy" else ("bearing.n_balls",)
-            runs[tool] = ssp_run.simulate_with(tool, ssp_archive, set_name, step=H, t_end=30 * H,
+            runs[tool] = ssp_tools.simulate_with(tool, ssp_archive, set_name, step=H, t_end=30 * H,
                                                record=record + extra)
         assert read_back["n_balls"] == n_balls
         assert np.all(runs["libcosim"]["bearing.n_balls"] == n_balls)
@@ -516,7 +518,7 @@ def test_fmpy_libcosim_and_ecos_apply_the_same_parameter_set(ssp_archive, monkey
 
 def test_run_parameter_set_picks_the_variant_ssd(ssp_archive):
     """`run --ssp FILE --parameter-set NAME`: our master reads the variant SSD of NAME."""
-    config, system = ssp_run.config_from_ssp(ssp_archive, "BB1B420205-15balls-1200rpm")
+    config, system = ssp_config.config_from_ssp(ssp_archive, "BB1B420205-15balls-1200rpm")
     try:
         assert system.ssd == "BB1B420205-15balls-1200rpm.ssd"
         assert config.settings["n_balls"] == 15 and config.settings["allow_ball_overlap"] is True
