@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import os
 import subprocess
 import sys
 import textwrap
@@ -364,3 +365,84 @@ def test_adaptive_run_through_fmi3_restores_fmu_states_like_the_fmi2_run(fmu3, b
     for column in r3.columns:
         scale = max(1.0, float(np.nanmax(np.abs(r2[column]))))
         np.testing.assert_allclose(r3[column], r2[column], rtol=0, atol=1e-12 * scale, err_msg=column)
+
+
+NO_NUMPY_HOST = r'''
+import ctypes, importlib.abc, sys
+BLOCKED = set(sys.argv[3].split(","))
+
+class Block(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in BLOCKED:
+            raise ImportError(f"{name} is blocked in this host")
+sys.meta_path.insert(0, Block())
+
+unzipped, token = sys.argv[1], sys.argv[2]
+lib = ctypes.CDLL(f"{unzipped}/binaries/x86_64-linux/BallBearing3.so")
+LOG = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_char_p)
+log = LOG(lambda env, status, category, message: print("LOG", status, message.decode()))
+lib.fmi3InstantiateCoSimulation.restype = ctypes.c_void_p
+lib.fmi3InstantiateCoSimulation.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p, ctypes.c_bool,
+    ctypes.c_bool, ctypes.c_bool, ctypes.c_bool, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p, LOG, ctypes.c_void_p]
+inst = lib.fmi3InstantiateCoSimulation(b"b3", token.encode(), f"{unzipped}/resources/".encode(), False, True,
+                                       False, False, None, 0, None, log, None)
+assert inst, "instantiate failed"
+inst = ctypes.c_void_p(inst)
+vr = (ctypes.c_uint32 * 6)(0, 1, 2, 3, 4, 5)
+u = (ctypes.c_double * 6)(2.5e-5, -1e-5, 0.0, 0.0, 100.0, 0.0)
+lib.fmi3EnterInitializationMode.argtypes = [ctypes.c_void_p, ctypes.c_bool, ctypes.c_double, ctypes.c_double,
+                                            ctypes.c_bool, ctypes.c_double]
+assert lib.fmi3EnterInitializationMode(inst, False, 0.0, 0.0, False, 0.0) == 0
+assert lib.fmi3SetFloat64(inst, vr, 6, u, 6) == 0
+assert lib.fmi3ExitInitializationMode(inst) == 0
+flags = [ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double()]
+lib.fmi3DoStep.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_bool] + [ctypes.c_void_p] * 4
+assert lib.fmi3DoStep(inst, 0.0, 1e-5, False, *[ctypes.addressof(f) for f in flags]) == 0
+out = (ctypes.c_double * 2)()
+assert lib.fmi3GetFloat64(inst, (ctypes.c_uint32 * 2)(6, 7), 2, out, 2) == 0
+print("F", repr(out[0]), repr(out[1]))
+print("MODULES", ",".join(sorted(m for m in sys.modules if m.split(".")[0] in ("numpy", "scipy"))))
+lib.fmi3FreeInstance(inst)
+'''
+
+
+def _no_numpy_host(fmu3, tmp_path, blocked):
+    md = read_model_description(str(fmu3))
+    unzipped = extract(str(fmu3), unzipdir=str(tmp_path / "fmu"))
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    result = subprocess.run([sys.executable, "-c", NO_NUMPY_HOST, unzipped, md.guid, ",".join(blocked)],
+                            capture_output=True, text=True, timeout=120, cwd=str(tmp_path), env=env)
+    return result, Path(unzipped)
+
+
+def test_runs_in_a_host_that_cannot_import_numpy(fmu3, tmp_path):
+    """A Python host without fmpy, in which numpy and scipy cannot be imported, drives the FMU through ctypes:
+    pythonfmu3's Python side and the slave need neither (the array output brings its own getter/setter).
+    The force equals the force law's."""
+    import fmu_bearing.hertz
+    from fmu_bearing.ball_bearing import BallBearing
+
+    if "scipy" in Path(fmu_bearing.hertz.__file__).read_text():
+        pytest.skip("fmu_bearing.hertz still imports scipy (which imports numpy): issue 13 item 1, another change")
+    result, _ = _no_numpy_host(fmu3, tmp_path, ["numpy", "scipy"])
+    assert result.returncode == 0, result.stdout + result.stderr
+    lines = dict(line.split(" ", 1) for line in result.stdout.splitlines() if line.startswith(("F ", "MODULES")))
+    assert lines["MODULES"].strip() == ""                      # nothing of numpy/scipy was imported
+    bearing = BallBearing()
+    ref = bearing.evaluate(2.5e-5, -1e-5, 0.0, 0.0, bearing.advance_cage(0.0, 100.0, 0.0, 1e-5), 100.0, 0.0)
+    assert tuple(float(x) for x in lines["F"].split()) == (ref.F_x, ref.F_y)
+
+
+def test_physics_that_cannot_be_imported_fail_instantiation_with_a_message_not_a_crash(fmu3, tmp_path):
+    """pythonfmu3 0.3.4 crashes the host when the slave module fails to import; the slave imports its physics
+    in a guard and fails the instantiation instead: NULL after a logger message naming the cause, exit 0."""
+    unzipped = Path(extract(str(fmu3), unzipdir=str(tmp_path / "probe")))
+    packed = sorted(p.name for p in (unzipped / "resources").iterdir() if p.is_dir() and p.name != "pythonfmu3"
+                    and (p / "__init__.py").is_file())
+    assert packed, "no physics package packed in the FMU"
+    result, _ = _no_numpy_host(fmu3, tmp_path, packed)
+    assert result.returncode == 1, result.stdout + result.stderr       # our host's assert, not a signal
+    assert "instantiate failed" in result.stderr
+    assert "LOG 4 " in result.stdout, result.stdout                   # fmi3Fatal, from the logger callback
+    logged = result.stdout[result.stdout.index("LOG 4 "):]            # the message spans lines
+    assert "cannot import its physics" in logged and "blocked in this host" in logged, logged

@@ -29,23 +29,34 @@ class by a regular expression on its source lines (the first class statement der
 no other line may look like one; it uses absolute imports only and no ``from __future__`` import.
 """
 import ctypes
+import sys
 from dataclasses import fields
 
 from pythonfmu3 import (Boolean, DefaultExperiment, Dimension, Fmi3Causality, Fmi3Initial, Fmi3Slave,
                         Fmi3Status, Fmi3StepResult, Fmi3Variability, Float64, Int32, UInt64, Unit)
 
-from fmu_bearing import ball_bearing as physics
-from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
-from fmu_bearing.parameters import BearingParameters
-from fmu_bearing.slaves import UNIT_DEFINITIONS, hold_before_raise
-from fmu_bearing.slaves.stepping import BearingStepping
+# The physics package is imported in a guard: if this module failed to import, pythonfmu3 0.3.4 would go on
+# with a NULL module (its PyErr_Print clears the error it then checks) and crash the host. A failure is
+# raised instead when the instance is created, which fmi3InstantiateCoSimulation turns into NULL after a
+# logger message naming the cause.
+try:
+    from fmu_bearing import ball_bearing as physics
+    from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
+    from fmu_bearing.parameters import BearingParameters
+    from fmu_bearing.slaves import UNIT_DEFINITIONS, hold_before_raise
+    from fmu_bearing.slaves.stepping import BearingStepping
+    _IMPORT_ERROR = None
+except Exception as _err:  # noqa: BLE001 - reported at instantiation
+    _IMPORT_ERROR = _err
+    BearingStepping, COUPLING_OUTPUTS, JOINT_INPUTS = object, (), ()
 
 #: outputs in the order of physics.BearingForce, (name, unit, description); unit None: Int32
 FORCE_OUTPUTS = COUPLING_OUTPUTS + (
     ("loaded_balls", None, "number of balls carrying load"),
     ("max_ball_load", "N", "largest ball load"),
 )
-assert len(FORCE_OUTPUTS) == len(physics.BearingForce._fields), "FORCE_OUTPUTS out of step with BearingForce"
+assert _IMPORT_ERROR is not None or len(FORCE_OUTPUTS) == len(physics.BearingForce._fields), \
+    "FORCE_OUTPUTS out of step with BearingForce"
 
 CAGE_ANGLE = ("cage_angle", "rad",
               "angle of ball 1 (ball r at cage_angle + 2 pi (r-1)/n_balls), time integral of the cage speed (eq. 16)")
@@ -129,6 +140,9 @@ class BallBearing3(Fmi3Slave, BearingStepping):
     """Deep-groove ball bearing with radial clearance (Xu et al. 2012), FMI 3.0 co-simulation."""
 
     def __init__(self, **kwargs):
+        if _IMPORT_ERROR is not None:
+            raise ImportError(f"BallBearing3 cannot import its physics from the FMU's resources: {_IMPORT_ERROR!r} "
+                              f"(Python {sys.version.split()[0]} at {sys.executable})")
         super().__init__(**kwargs)
         self.author = "bearing-cosim contributors"
         self.description = ("Deep-groove ball bearing with radial clearance (Xu et al., Mech. Mach. Theory 56, "
@@ -224,7 +238,7 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         self._loads, self._scratch = [0.0] * n, [0.0] * n
 
     # --- FMI ----------------------------------------------------------------------------------
-    def parameters(self) -> BearingParameters:
+    def parameters(self):
         """The current parameter values as BearingParameters."""
         return BearingParameters(**{name: getattr(self, name) for name in self._param_names})
 
