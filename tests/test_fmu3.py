@@ -422,7 +422,11 @@ def test_runs_in_a_host_that_cannot_import_numpy(fmu3, tmp_path):
     import fmu_bearing.hertz
     from fmu_bearing.ball_bearing import BallBearing
 
-    if "scipy" in Path(fmu_bearing.hertz.__file__).read_text():
+    import ast
+    tree = ast.parse(Path(fmu_bearing.hertz.__file__).read_text())
+    imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    imported |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+    if any(m.split(".")[0] in ("scipy", "numpy") for m in imported):
         pytest.skip("fmu_bearing.hertz still imports scipy (which imports numpy): issue 13 item 1, another change")
     result, _ = _no_numpy_host(fmu3, tmp_path, ["numpy", "scipy"])
     assert result.returncode == 0, result.stdout + result.stderr
@@ -437,8 +441,8 @@ def test_physics_that_cannot_be_imported_fail_instantiation_with_a_message_not_a
     """pythonfmu3 0.3.4 crashes the host when the slave module fails to import; the slave imports its physics
     in a guard and fails the instantiation instead: NULL after a logger message naming the cause, exit 0."""
     unzipped = Path(extract(str(fmu3), unzipdir=str(tmp_path / "probe")))
-    packed = sorted(p.name for p in (unzipped / "resources").iterdir() if p.is_dir() and p.name != "pythonfmu3"
-                    and (p / "__init__.py").is_file())
+    packed = sorted(p.name for p in (unzipped / "resources").iterdir() if p.is_dir() and "pythonfmu3" not in p.name
+                    and (p / "__init__.py").is_file())   # the (sealed) physics package, not pythonfmu3's copy
     assert packed, "no physics package packed in the FMU"
     result, _ = _no_numpy_host(fmu3, tmp_path, packed)
     assert result.returncode == 1, result.stdout + result.stderr       # our host's assert, not a signal
@@ -446,3 +450,52 @@ def test_physics_that_cannot_be_imported_fail_instantiation_with_a_message_not_a
     assert "LOG 4 " in result.stdout, result.stdout                   # fmi3Fatal, from the logger callback
     logged = result.stdout[result.stdout.index("LOG 4 "):]            # the message spans lines
     assert "cannot import its physics" in logged and "blocked in this host" in logged, logged
+
+
+SEALED_HOST = r'''
+import sys, types
+from fmpy import extract, read_model_description
+from fmpy.fmi3 import FMU3Slave
+doctored = types.ModuleType("fmu_bearing")          # a host that imported another fmu_bearing
+sys.modules["fmu_bearing"] = doctored
+path = sys.argv[1]
+md = read_model_description(path); d = extract(path)
+vr = {v.name: v.valueReference for v in md.modelVariables}
+before_path, before_modules = list(sys.path), set(sys.modules)
+for rep in range(2):
+    instances = []
+    for k in range(3):
+        s = FMU3Slave(guid=md.guid, unzipDirectory=d, modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName=f"b{k}")
+        s.instantiate()
+        s.enterInitializationMode()
+        s.setFloat64([vr[n] for n in ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")],
+                     [2.5e-5, -1e-5, 0.0, 0.0, 100.0, 0.0])
+        s.exitInitializationMode()
+        s.doStep(0.0, 1e-5)
+        instances.append(s)
+    print("F", *map(repr, instances[-1].getFloat64([vr["F_x"], vr["F_y"]])))
+    for s in instances:
+        s.terminate()
+        s.freeInstance()
+    added = sorted(set(sys.modules) - before_modules)
+    print("LEFT", rep, sys.path == before_path, sys.modules["fmu_bearing"] is doctored,
+          ",".join(m for m in added if m.split(".")[0] not in sys.stdlib_module_names))
+'''
+
+
+def test_sealed_physics_and_sys_path_and_modules_restored_after_free(fmu3, tmp_path):
+    """A host that imported another ``fmu_bearing`` still gets the FMU's own physics (packed under a private
+    name); after the last fmi3FreeInstance, sys.path and sys.modules are as the FMU found them, and a new
+    instance works again (twice, three instances each)."""
+    from fmu_bearing.ball_bearing import BallBearing
+
+    result = subprocess.run([sys.executable, "-c", SEALED_HOST, str(fmu3)], capture_output=True, text=True,
+                            timeout=120, cwd=str(tmp_path))
+    assert result.returncode == 0, result.stdout + result.stderr
+    bearing = BallBearing()
+    ref = bearing.evaluate(2.5e-5, -1e-5, 0.0, 0.0, bearing.advance_cage(0.0, 100.0, 0.0, 1e-5), 100.0, 0.0)
+    forces = [line.split()[1:] for line in result.stdout.splitlines() if line.startswith("F ")]
+    assert [tuple(map(float, f)) for f in forces] == [(ref.F_x, ref.F_y)] * 2
+    left = [line.split(" ", 4)[1:] for line in result.stdout.splitlines() if line.startswith("LEFT ")]
+    assert left == [[str(rep), "True", "True", ""] for rep in range(2)], result.stdout

@@ -30,6 +30,7 @@ no other line may look like one; it uses absolute imports only and no ``from __f
 """
 import ctypes
 import sys
+import weakref
 from dataclasses import fields
 
 from pythonfmu3 import (Boolean, DefaultExperiment, Dimension, Fmi3Causality, Fmi3Initial, Fmi3Slave,
@@ -43,7 +44,7 @@ try:
     from fmu_bearing import ball_bearing as physics
     from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
     from fmu_bearing.parameters import BearingParameters
-    from fmu_bearing.slaves import UNIT_DEFINITIONS, hold_before_raise
+    from fmu_bearing.slaves import UNIT_DEFINITIONS, hold_before_raise, release_on_free, weak_accessors
     from fmu_bearing.slaves.stepping import BearingStepping
     _IMPORT_ERROR = None
 except Exception as _err:  # noqa: BLE001 - reported at instantiation
@@ -139,11 +140,14 @@ def unit_definitions(names):
 class BallBearing3(Fmi3Slave, BearingStepping):
     """Deep-groove ball bearing with radial clearance (Xu et al. 2012), FMI 3.0 co-simulation."""
 
+    TERMINATE_CALL = "fmi3Terminate"
+
     def __init__(self, **kwargs):
         if _IMPORT_ERROR is not None:
             raise ImportError(f"BallBearing3 cannot import its physics from the FMU's resources: {_IMPORT_ERROR!r} "
                               f"(Python {sys.version.split()[0]} at {sys.executable})")
         super().__init__(**kwargs)
+        release_on_free(self)   # the last fmi3FreeInstance removes the sealed modules and the sys.path entry
         self.author = "bearing-cosim contributors"
         self.description = ("Deep-groove ball bearing with radial clearance (Xu et al., Mech. Mach. Theory 56, "
                             "2012): force on the housing from the journal eccentricity, per-ball Hertz contact "
@@ -153,6 +157,7 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=0.1, step_size=1e-5)
 
         self._bearing = None           # physics.BallBearing, built at exit of initialisation
+        self._terminated = False       # fmi3Terminate was called: no more steps
         self._pending_error = None     # a refused call, reported by the next doStep
         self._param_names = tuple(f.name for f in fields(BearingParameters))
         defaults = BearingParameters()
@@ -195,11 +200,12 @@ class BallBearing3(Fmi3Slave, BearingStepping):
                 self._register(Float64Variable, f.name, float(f.default), desc, unit=unit, **kw)
                 units.add(unit)
         name, unit, desc = BALL_LOADS
+        me = weakref.proxy(self)   # the accessors must not keep the slave alive (release_on_free)
         self._loads_vr = len(self.vars)
         self.register_variable(Float64Array(
             name, [Dimension(valueReference=str(self._n_balls_vr))], unit=unit, description=desc,
             causality=output, variability=cont, initial=calculated,
-            getter=self._get_loads, setter=self._set_loads))
+            getter=lambda: list(me._loads), setter=lambda values: me._set_loads(values)))
         # FMI 3.0 requires exactly one independent variable: the time, at the end of the last step
         self.time = 0.0
         self._register(Float64Variable, "time", 0.0, "simulation time", unit="s",
@@ -221,12 +227,9 @@ class BallBearing3(Fmi3Slave, BearingStepping):
     def _register(self, cls, name, start, description, attributes=None, unit=None, **kwargs):
         setattr(self, name, start)
         extra = {"unit": unit} if unit else {}
+        getter, setter = weak_accessors(self, name)   # no reference cycle: the slave dies with fmi3FreeInstance
         self.register_variable(cls(name, attributes=attributes, description=description,
-                                   getter=lambda: getattr(self, name),
-                                   setter=lambda value: setattr(self, name, value), **extra, **kwargs))
-
-    def _get_loads(self):
-        return list(self._loads)
+                                   getter=getter, setter=setter, **extra, **kwargs))
 
     def _set_loads(self, values):  # FMU state only (outputs cannot be set through the FMI API)
         self._resize_loads(len(values))
@@ -266,6 +269,9 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             return Fmi3StepResult(status=Fmi3Status.discard)  # the outputs keep the values of the last good step
         self.time = current_time + step_size
         return Fmi3StepResult()
+
+    def terminate(self):
+        self._terminated, self._bearing = True, None   # a later doStep is refused (fmi3Discard, logged)
 
     def _error(self, message):
         self.log(str(message), Fmi3Status.error)

@@ -17,11 +17,15 @@ from fmu_bearing import ball_bearing as physics
 class BearingStepping:
     """Mixin: ``_advance`` (one communication step) and ``_evaluate`` (outputs at a cage angle)."""
 
+    #: the FMI call that set ``_terminated`` (named in the refusal of a later step)
+    TERMINATE_CALL = "fmi2Terminate"
+
     def _advance(self, step_size):
         """Advance over one step of ``step_size`` [s]; None, or why the step is refused (outputs unchanged)."""
         bearing = self._bearing
         if bearing is None or self._pending_error is not None:
-            reason = self._pending_error or "the instance is not initialised"
+            reason = self._pending_error or (f"the instance was terminated ({self.TERMINATE_CALL})"
+                                             if getattr(self, "_terminated", False) else "the instance is not initialised")
             self._pending_error = None
             return reason
         w_i, w_o = self.omega_inner, self.omega_outer
