@@ -222,6 +222,9 @@ class BallBearing3(Fmi3Slave, BearingStepping):
                                         Fmi3Causality.structuralParameter)}
         self._kind = {vr: next(k for k in ("Float64", "Int32", "UInt64", "Boolean") if isinstance(v, _TYPES[k]))
                       for vr, v in self.vars.items()}
+        by_name = {v.name: vr for vr, v in self.vars.items()}
+        self._coupling_vrs = [by_name[n] for n, _, _ in COUPLING_OUTPUTS]
+        assert [self.vars[vr].name for vr in self._coupling_vrs[:2]] == ["F_x", "F_y"]
 
     # --- registration helpers (build time and instantiation only) ------------------------------
     def _register(self, cls, name, start, description, attributes=None, unit=None, **kwargs):
@@ -290,7 +293,7 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         return out
 
     def get_float64(self, vrs):
-        if vrs == [6, 7, 8, 9, 10, 11, 12, 13]:  # the master's usual call: the coupling outputs
+        if vrs == self._coupling_vrs:  # the master's usual call: the coupling outputs, in declaration order
             return [self.F_x, self.F_y, self.stiffness_xx, self.stiffness_xy, self.stiffness_yy,
                     self.damping_xx, self.damping_xy, self.damping_yy]
         return [float(x) for x in self._values(vrs, "Float64", 0.0)]
