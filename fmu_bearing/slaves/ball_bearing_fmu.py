@@ -29,6 +29,7 @@ from pythonfmu import (Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, F
 from pythonfmu.enums import Fmi2Status
 
 from fmu_bearing import ball_bearing as physics
+from fmu_bearing import life
 from fmu_bearing.parameters import BearingParameters
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
 from fmu_bearing.slaves import add_unit_definitions, guard_pythonfmu_exit, hold_before_raise
@@ -53,6 +54,28 @@ _INPUT_VRS = list(range(len(INPUTS)))
 
 CAGE_ANGLE = ("cage_angle", "rad",
               "angle of ball 1 (ball r at cage_angle + 2 pi (r-1)/n_balls), time integral of the cage speed (eq. 16)")
+
+#: load ratings, computed from the parameters at initialisation: (name, unit, description, LoadRatings field)
+RATING_OUTPUTS = (
+    ("dynamic_load_rating", "N", "basic dynamic radial load rating C_r (ISO 281 eq. 2, b_m = 1.3), from the "
+                                 "geometry at initialisation", "C_r"),
+    ("raceway_rating_inner", "N", "basic dynamic load rating Q_ci of the inner raceway contact (ISO/TS 16281)", "Q_ci"),
+    ("raceway_rating_outer", "N", "basic dynamic load rating Q_ce of the outer raceway contact (ISO/TS 16281)", "Q_ce"),
+)
+#: life outputs accumulated over the simulated time (docs/bearing-life.md): (name, unit, description, property)
+LIFE_OUTPUTS = (
+    ("equivalent_load_inner", "N", "equivalent rolling-element load Q_ei of the inner ring over the simulated "
+                                   "history (ISO/TS 16281); 0 before any ball is loaded", "equivalent_load_inner"),
+    ("equivalent_load_outer", "N", "equivalent rolling-element load Q_ee of the outer ring over the simulated "
+                                   "history (ISO/TS 16281); 0 before any ball is loaded", "equivalent_load_outer"),
+    ("rating_life", "h", "reference rating life L10r (x reliability_factor) at the mean relative ring speed of "
+                         "the simulated history; +inf (infinite life) before any ball is loaded", "life_hours"),
+    ("rating_life_revolutions", "Mrev", "reference rating life L10r (x reliability_factor) in millions of "
+                                        "revolutions of one ring relative to the other; +inf before any ball is "
+                                        "loaded", "life_revolutions"),
+)
+#: key of the life accumulator's sums in the FMU state
+_LIFE_STATE = "__life_accumulator__"
 
 #: Integer parameters: (min, max); max None = the FMU's per-ball capacity
 _INTEGER_RANGES = {"n_balls": (3, None), "damping_model": (0, 2)}
@@ -79,6 +102,9 @@ class _TypeAttributes:
     def to_xml(self):
         node = super().to_xml()
         node[0].attrib.update(self.type_attributes)
+        start = node[0].get("start")
+        if start in ("inf", "-inf"):  # xs:double spells infinity INF (the life outputs start at +INF)
+            node[0].set("start", start.upper())
         return node
 
 
@@ -111,6 +137,7 @@ class BallBearing(Fmi2Slave):
         guard_pythonfmu_exit(self.resources)
         self.capacity = read_capacity(self.resources)
         self._bearing = None                       # physics.BallBearing, built at exit of initialisation
+        self._life = None                          # life.LifeAccumulator, built at exit of initialisation
         self._pending_error = None                 # a refused call, reported by the next doStep
         self._loads = [0.0] * self.capacity        # ball_load_k outputs (fixed list object: getters bind to it)
         self._scratch = [0.0] * self.capacity      # evaluate() writes here; copied to _loads on success
@@ -131,6 +158,13 @@ class BallBearing(Fmi2Slave):
         name, unit, desc = CAGE_ANGLE
         self._register(RealVariable, name, float(BearingParameters().cage_angle_start), desc, {"unit": unit},
                        causality=output, variability=cont, initial=exact)
+        default_life = life.LifeAccumulator(life.LoadRatings.of_bearing(BearingParameters()))
+        for name, unit, desc, field in RATING_OUTPUTS:
+            self._register(RealVariable, name, float(getattr(default_life.ratings, field)), desc, {"unit": unit},
+                           causality=output, variability=discrete, initial=exact)
+        for name, unit, desc, prop in LIFE_OUTPUTS:
+            self._register(RealVariable, name, float(getattr(default_life, prop)), desc, {"unit": unit},
+                           causality=output, variability=cont, initial=exact)
         # Parameters: one per BearingParameters field, with its default, unit and description;
         # the FMI type follows the default's Python type (bool -> Boolean, int -> Integer, else Real).
         for f in fields(BearingParameters):
@@ -191,6 +225,7 @@ class BallBearing(Fmi2Slave):
     def exit_initialization_mode(self):
         try:
             bearing = physics.BallBearing(self.parameters(), self.capacity)  # validates, names the parameter
+            accumulator = self._new_life(bearing.params)
             bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer)
             message = self._evaluate(float(bearing.params.cage_angle_start), bearing)
             if message is not None:
@@ -201,6 +236,8 @@ class BallBearing(Fmi2Slave):
             hold_before_raise(self)  # pythonfmu 0.7 over-releases objects on the exception path
             raise  # -> fmi2ExitInitializationMode returns fmi2Fatal (pythonfmu 0.7 has no route to fmi2Error)
         self._bearing = bearing
+        self._life = accumulator
+        self._publish_life(accumulator, ratings=True)
         inputs = (Fmi2Causality.input,)
         self._real_set = self._setters(Real, inputs)   # fixed parameters and outputs are read-only now
         self._int_set = self._setters(Integer, inputs)
@@ -222,7 +259,25 @@ class BallBearing(Fmi2Slave):
         message = self._evaluate(bearing.advance_cage(self.cage_angle, w_i, w_o, step_size), bearing)
         if message is not None:
             return self._refuse_step(current_time, message)
+        try:  # the loads at the end of the step, held over it (docs/bearing-life.md)
+            self._life.add(self._loads, w_i, w_o, step_size)
+            self._publish_life(self._life)
+        except Exception as err:  # never let an exception reach pythonfmu's C++ side
+            return self._refuse_step(current_time, f"life accumulation failed: {err!r}")
         return True
+
+    @staticmethod
+    def _new_life(params):
+        """A LifeAccumulator for ``params`` (raises life.LifeInputError outside ISO 281's range)."""
+        return life.LifeAccumulator(life.LoadRatings.of_bearing(params), params.reliability_factor)
+
+    def _publish_life(self, accumulator, ratings=False):
+        """Copy the accumulator's results (and, at initialisation, the ratings) to the output variables."""
+        if ratings:
+            for name, _, _, field in RATING_OUTPUTS:
+                setattr(self, name, float(getattr(accumulator.ratings, field)))
+        for name, _, _, prop in LIFE_OUTPUTS:
+            setattr(self, name, float(getattr(accumulator, prop)))
 
     def _refuse_step(self, current_time, reason):
         self._error(f"doStep at t = {current_time!r} s refused: {reason}")
@@ -300,7 +355,14 @@ class BallBearing(Fmi2Slave):
         self._pending_error = self._pending_error or msg
         return value
 
-    # --- FMU state: pythonfmu saves every registered variable (inputs, outputs incl. cage_angle, parameters)
+    # --- FMU state: pythonfmu saves every registered variable (inputs, outputs incl. cage_angle, parameters);
+    # the life accumulator's sums are added under _LIFE_STATE
+    def _get_fmu_state(self):
+        state = super()._get_fmu_state()
+        if self._life is not None:
+            state[_LIFE_STATE] = self._life.state()
+        return state
+
     @staticmethod
     def _fmu_state_from_bytes(state):
         try:
@@ -313,12 +375,24 @@ class BallBearing(Fmi2Slave):
             self._error(state[_INVALID_STATE])
             self._pending_error = self._pending_error or state[_INVALID_STATE]
             return
-        super()._set_fmu_state(state)
+        sums = state.get(_LIFE_STATE)
+        if self._life is not None:  # validate the accumulator's sums before assigning anything
+            try:
+                life.LifeAccumulator(self._life.ratings).restore(sums if sums is not None else [])
+            except Exception as err:
+                message = f"setFMUstate: no valid life accumulator in the state ({err})"
+                self._error(message)
+                self._pending_error = self._pending_error or message
+                return
+        super()._set_fmu_state({k: v for k, v in state.items() if k != _LIFE_STATE})
         if self._bearing is not None:
             try:
                 params = self.parameters()
                 if params != self._bearing.params:  # a state of an instance with other parameters
                     self._bearing = physics.BallBearing(params, self.capacity)
+                    self._life = self._new_life(params)
+                self._life.restore(sums)
+                self._publish_life(self._life, ratings=True)
             except Exception as err:
                 self._bearing = None
                 self._error(f"setFMUstate: the restored parameters are invalid: {err}")
