@@ -120,6 +120,10 @@ class BooleanVariable(_TypeAttributes, Boolean):
     pass
 
 
+def _ignore(value):
+    """Setter of a read-only computed output (the FMU state restores its source instead)."""
+
+
 #: key of the state returned for bytes that are not a serialized state (no exception may escape)
 _INVALID_STATE = "__invalid_state__"
 
@@ -158,13 +162,16 @@ class BallBearing(Fmi2Slave):
         name, unit, desc = CAGE_ANGLE
         self._register(RealVariable, name, float(BearingParameters().cage_angle_start), desc, {"unit": unit},
                        causality=output, variability=cont, initial=exact)
-        default_life = life.LifeAccumulator(life.LoadRatings.of_bearing(BearingParameters()))
+        self._empty_life = life.LifeAccumulator(life.LoadRatings.of_bearing(BearingParameters()))
         for name, unit, desc, field in RATING_OUTPUTS:
-            self._register(RealVariable, name, float(getattr(default_life.ratings, field)), desc, {"unit": unit},
+            self._register(RealVariable, name, float(getattr(self._empty_life.ratings, field)), desc, {"unit": unit},
                            causality=output, variability=discrete, initial=exact)
+        # Life outputs are computed from the accumulator when read (not every step); the FMU state restores
+        # the accumulator itself, so their setters ignore the saved values.
         for name, unit, desc, prop in LIFE_OUTPUTS:
-            self._register(RealVariable, name, float(getattr(default_life, prop)), desc, {"unit": unit},
-                           causality=output, variability=cont, initial=exact)
+            self.register_variable(RealVariable(
+                name, type_attributes={"unit": unit}, description=desc, causality=output, variability=cont,
+                initial=exact, getter=partial(self._life_output, prop), setter=_ignore))
         # Parameters: one per BearingParameters field, with its default, unit and description;
         # the FMI type follows the default's Python type (bool -> Boolean, int -> Integer, else Real).
         for f in fields(BearingParameters):
@@ -237,7 +244,7 @@ class BallBearing(Fmi2Slave):
             raise  # -> fmi2ExitInitializationMode returns fmi2Fatal (pythonfmu 0.7 has no route to fmi2Error)
         self._bearing = bearing
         self._life = accumulator
-        self._publish_life(accumulator, ratings=True)
+        self._publish_ratings(accumulator.ratings)
         inputs = (Fmi2Causality.input,)
         self._real_set = self._setters(Real, inputs)   # fixed parameters and outputs are read-only now
         self._int_set = self._setters(Integer, inputs)
@@ -261,7 +268,6 @@ class BallBearing(Fmi2Slave):
             return self._refuse_step(current_time, message)
         try:  # the loads at the end of the step, held over it (docs/bearing-life.md)
             self._life.add(self._loads, w_i, w_o, step_size)
-            self._publish_life(self._life)
         except Exception as err:  # never let an exception reach pythonfmu's C++ side
             return self._refuse_step(current_time, f"life accumulation failed: {err!r}")
         return True
@@ -271,13 +277,14 @@ class BallBearing(Fmi2Slave):
         """A LifeAccumulator for ``params`` (raises life.LifeInputError outside ISO 281's range)."""
         return life.LifeAccumulator(life.LoadRatings.of_bearing(params), params.reliability_factor)
 
-    def _publish_life(self, accumulator, ratings=False):
-        """Copy the accumulator's results (and, at initialisation, the ratings) to the output variables."""
-        if ratings:
-            for name, _, _, field in RATING_OUTPUTS:
-                setattr(self, name, float(getattr(accumulator.ratings, field)))
-        for name, _, _, prop in LIFE_OUTPUTS:
-            setattr(self, name, float(getattr(accumulator, prop)))
+    def _publish_ratings(self, ratings):
+        """Copy the load ratings to their output variables."""
+        for name, _, _, field in RATING_OUTPUTS:
+            setattr(self, name, float(getattr(ratings, field)))
+
+    def _life_output(self, prop):
+        """A life output (LIFE_OUTPUTS) of the accumulator; before initialisation, of an empty one."""
+        return float(getattr(self._life if self._life is not None else self._empty_life, prop))
 
     def _refuse_step(self, current_time, reason):
         self._error(f"doStep at t = {current_time!r} s refused: {reason}")
@@ -392,7 +399,7 @@ class BallBearing(Fmi2Slave):
                     self._bearing = physics.BallBearing(params, self.capacity)
                     self._life = self._new_life(params)
                 self._life.restore(sums)
-                self._publish_life(self._life, ratings=True)
+                self._publish_ratings(self._life.ratings)
             except Exception as err:
                 self._bearing = None
                 self._error(f"setFMUstate: the restored parameters are invalid: {err}")
