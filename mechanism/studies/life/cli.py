@@ -16,6 +16,9 @@ def _floats(text: str) -> tuple[float, ...]:
 def cmd_life_study(args) -> int:
     if not (args.startup_revs >= 0 and args.window_revs > 0 and args.step > 0):
         raise ValueError("--startup-revs must be >= 0, --window-revs and --step positive")
+    if args.step > sweep.MAX_STEP:
+        raise ValueError(f"--step {args.step:g} s is above {sweep.MAX_STEP:g} s, the largest step measured to "
+                         f"give the life of 1e-5 s steps (larger steps diverge or give wrong lives)")
     settings = sweep.Settings(startup_revs=args.startup_revs, window_revs=args.window_revs, step=args.step,
                               balls=args.balls)
     clearances = tuple(c * 1e-6 for c in _floats(args.clearances)) if args.clearances else sweep.CLEARANCES
@@ -62,7 +65,8 @@ def register(subparsers) -> None:
                    help="crank revolutions simulated before the life window (default 1)")
     p.add_argument("--window-revs", type=float, default=1.0,
                    help="crank revolutions over which the life is accumulated (default 1)")
-    p.add_argument("--step", type=float, default=1e-5, help="communication step = sampling interval [s]")
+    p.add_argument("--step", type=float, default=sweep.DEFAULT_STEP,
+                   help=f"communication step = sampling interval [s] (default and maximum {sweep.DEFAULT_STEP:g})")
     p.add_argument("--workers", type=int, default=None, help="parallel runs (default: the number of cores)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_life_study)
