@@ -37,6 +37,38 @@ P_STATIONARY = 10.0 / 3.0
 HOUR = 3600.0
 
 
+#: outputs of the BallBearing FMU (and of the in-process endpoint) from the ratings, computed from the
+#: parameters at initialisation: (name, unit, description, LoadRatings field)
+RATING_OUTPUTS = (
+    ("dynamic_load_rating", "N", "basic dynamic radial load rating C_r (ISO 281 eq. 2, b_m = 1.3), from the "
+                                 "geometry at initialisation", "C_r"),
+    ("raceway_rating_inner", "N", "basic dynamic load rating Q_ci of the inner raceway contact (ISO/TS 16281)", "Q_ci"),
+    ("raceway_rating_outer", "N", "basic dynamic load rating Q_ce of the outer raceway contact (ISO/TS 16281)", "Q_ce"),
+)
+#: outputs accumulated over the simulated time (docs/bearing-life.md): (name, unit, description, LifeAccumulator property)
+LIFE_OUTPUTS = (
+    ("equivalent_load_inner", "N", "equivalent rolling-element load Q_ei of the inner ring over the simulated "
+                                   "history (ISO/TS 16281); 0 before any ball is loaded", "equivalent_load_inner"),
+    ("equivalent_load_outer", "N", "equivalent rolling-element load Q_ee of the outer ring over the simulated "
+                                   "history (ISO/TS 16281); 0 before any ball is loaded", "equivalent_load_outer"),
+    ("rating_life", "h", "reference rating life L10r (x reliability_factor) at the mean relative ring speed of "
+                         "the simulated history; +inf (infinite life) before any ball is loaded", "life_hours"),
+    ("rating_life_revolutions", "Mrev", "reference rating life L10r (x reliability_factor) in millions of "
+                                        "revolutions of one ring relative to the other; +inf before any ball is "
+                                        "loaded", "life_revolutions"),
+)
+
+
+#: names of RATING_OUTPUTS then LIFE_OUTPUTS
+LIFE_NAMES = tuple(name for name, _, _, _ in RATING_OUTPUTS + LIFE_OUTPUTS)
+
+
+def output_values(acc: "LifeAccumulator") -> list[float]:
+    """The values of RATING_OUTPUTS then LIFE_OUTPUTS for ``acc``."""
+    return ([float(getattr(acc.ratings, field)) for _, _, _, field in RATING_OUTPUTS]
+            + [float(getattr(acc, prop)) for _, _, _, prop in LIFE_OUTPUTS])
+
+
 class LifeInputError(ValueError):
     """Inputs the life calculation cannot accept (geometry out of the standard's range, bad loads)."""
 

@@ -1,8 +1,9 @@
 """Bearing rating life of a run (issue 16): the figures summary.json and the studies report.
 
-The physics is ``fmu_bearing.life`` (one home). A co-simulation run records the BallBearing FMU's life
-outputs as sample columns, so its life is the FMU's final outputs (``life_from_outputs``); runs without
-them (the monolithic reference, or a window of any run) accumulate the recorded ball loads with the same
+The physics is ``fmu_bearing.life`` (one home). The master keeps the component's life outputs at
+the end of a run (BallBearing FMU, or the in-process endpoint's accumulator) in ``meta["life_outputs"]``,
+so a co-simulation's life is the FMU's final outputs (``life_from_outputs``); runs without them (the
+monolithic reference, or a window of any run) accumulate the recorded ball loads with the same
 ``LifeAccumulator`` (``life_from_samples``): the loads of sample k held over (t_{k-1}, t_k], which is the
 FMU's own rule when samples are taken every communication step.
 """
@@ -12,35 +13,20 @@ import math
 
 import numpy as np
 
-from fmu_bearing.life import LifeAccumulator, LoadRatings
+from fmu_bearing.life import LIFE_OUTPUTS, RATING_OUTPUTS, LifeAccumulator, LoadRatings, output_values
 from fmu_bearing.parameters import BearingParameters
+from .exchange import bearing_parameters
 
-#: FMU output -> summary key (SI units in the key)
-OUTPUT_KEYS = {
-    "dynamic_load_rating": "dynamic_load_rating_N",
-    "raceway_rating_inner": "raceway_rating_inner_N",
-    "raceway_rating_outer": "raceway_rating_outer_N",
-    "equivalent_load_inner": "equivalent_load_inner_N",
-    "equivalent_load_outer": "equivalent_load_outer_N",
-    "rating_life": "rating_life_h",
-    "rating_life_revolutions": "rating_life_Mrev",
-}
-#: units of the life columns in timeseries.csv
-LIFE_UNITS = {"dynamic_load_rating": "N", "raceway_rating_inner": "N", "raceway_rating_outer": "N",
-              "equivalent_load_inner": "N", "equivalent_load_outer": "N", "rating_life": "h",
-              "rating_life_revolutions": "Mrev"}
+#: FMU life output -> summary key (unit in the key, as the other summary figures)
+OUTPUT_KEYS = {name: f"{name.replace('_revolutions', '')}_{unit}" for name, unit, _, _ in RATING_OUTPUTS + LIFE_OUTPUTS}
 
 
 def figures(acc: LifeAccumulator, source: str, window: tuple[float, float]) -> dict:
-    """The summary figures of an accumulator (infinite life is written as JSON Infinity)."""
-    r = acc.ratings
-    return {"source": source, "window_s": [float(window[0]), float(window[1])],
-            "reliability_factor": acc.reliability_factor,
-            "dynamic_load_rating_N": r.C_r, "raceway_rating_inner_N": r.Q_ci, "raceway_rating_outer_N": r.Q_ce,
-            "equivalent_load_inner_N": acc.equivalent_load_inner,
-            "equivalent_load_outer_N": acc.equivalent_load_outer,
-            "rating_life_h": acc.life_hours, "rating_life_Mrev": acc.life_revolutions,
-            "mean_relative_speed_rpm": acc.speed * 60.0}
+    """The summary figures of an accumulator (an infinite life is written as JSON Infinity)."""
+    out = {"source": source, "window_s": [float(window[0]), float(window[1])]}
+    out.update(zip(OUTPUT_KEYS.values(), output_values(acc)))
+    out["mean_relative_speed_rpm"] = acc.speed * 60.0
+    return out
 
 
 def life_from_samples(result, params: BearingParameters, t_start: float = -math.inf,
@@ -61,9 +47,40 @@ def life_from_samples(result, params: BearingParameters, t_start: float = -math.
 
 
 def life_from_outputs(result) -> dict | None:
-    """The FMU's life outputs at the last sample of ``result``, or None if it has none."""
-    if not result.has("rating_life") or len(result["time"]) == 0:
+    """The component's life outputs at the end of the run (BallBearing FMU, or the in-process endpoint's
+    accumulator; the master keeps them in ``meta["life_outputs"]``), or None if it has none."""
+    values = result.meta.get("life_outputs")
+    if not values or len(result["time"]) == 0:
         return None
-    out = {"source": "fmu outputs", "window_s": [float(result["time"][0]), float(result["time"][-1])]}
-    out.update({key: float(result[name][-1]) for name, key in OUTPUT_KEYS.items() if result.has(name)})
+    out = {"source": "component outputs", "window_s": [float(result["time"][0]), float(result["time"][-1])]}
+    out.update({key: float(values[name]) for name, key in OUTPUT_KEYS.items() if name in values})
     return out
+
+
+def run_parameters(result) -> BearingParameters | None:
+    """The bearing parameters of a ball-bearing run from its meta data (None for other joints)."""
+    config = result.meta.get("config") or {}
+    if config.get("joint", "bearing") != "bearing":
+        return None
+    settings = dict(config.get("settings") or {})
+    if config.get("balls") is not None:
+        settings["n_balls"] = int(config["balls"])
+    try:
+        return bearing_parameters(settings)
+    except ValueError:
+        return None
+
+
+def run_life(result, window: tuple[float, float] | None = None) -> dict | None:
+    """Life figures of a ball-bearing run: over the whole run the component's final outputs if it has them,
+    else (and over a ``window`` [s]) the recorded ball loads accumulated; None for other joints."""
+    if window is None:
+        out = life_from_outputs(result)
+        if out is not None:
+            return out
+    params = run_parameters(result)
+    if params is None or not result.ball_load_columns or len(result["time"]) < 2:
+        return None
+    t = result["time"]
+    window = window or (float(t[0]), float(t[-1]))
+    return figures(life_from_samples(result, params, *window), "recorded samples", window)

@@ -34,3 +34,48 @@ def test_life_study_writes_tables_and_plots(tmp_path, capsys):
 def test_life_study_refuses_an_unstable_step(tmp_path, capsys):
     code = main(["life-study", "--out", str(tmp_path), "--step", "1e-4", "--quiet"])
     assert code == 2 and "--step" in capsys.readouterr().err
+
+
+# --- the life figures of single runs (summary.json) ---------------------------------------------
+
+@pytest.fixture(scope="module")
+def runs(ball_bearing_fmu):
+    from mechanism.run import RunConfig, run
+    base = RunConfig(rpm=1200.0, revs=0.2, progress=False, fmu=str(ball_bearing_fmu))
+    from dataclasses import replace
+    return {mode: run(replace(base, mode=mode)) for mode in ("cosim", "inprocess", "monolithic")}
+
+
+def test_summary_life_from_the_fmu_equals_the_in_process_accumulator(runs):
+    from mechanism.results import summary
+    fmu, inproc = summary(runs["cosim"])["life"], summary(runs["inprocess"])["life"]
+    assert fmu["source"] == inproc["source"] == "component outputs"
+    for key in ("equivalent_load_inner_N", "equivalent_load_outer_N", "rating_life_h", "rating_life_Mrev"):
+        assert 0 < fmu[key] < math.inf
+        assert fmu[key] == pytest.approx(inproc[key], rel=1e-9)
+
+
+def test_fmu_final_outputs_equal_the_recorded_loads_accumulated(runs):
+    """The FMU accumulates every step; the samples (every step here) accumulated afterwards agree."""
+    from mechanism.life import run_life
+    r = runs["cosim"]
+    t = r["time"]
+    fmu = run_life(r)
+    samples = run_life(r, (float(t[0]), float(t[-1])))
+    assert samples["source"] == "recorded samples"
+    for key in ("equivalent_load_inner_N", "equivalent_load_outer_N", "rating_life_h"):
+        assert samples[key] == pytest.approx(fmu[key], rel=1e-9)
+
+
+def test_monolithic_life_is_close_to_the_cosimulation(runs):
+    from mechanism.results import summary
+    mono, fmu = summary(runs["monolithic"])["life"], summary(runs["cosim"])["life"]
+    assert mono["source"] == "recorded samples"
+    assert mono["rating_life_h"] == pytest.approx(fmu["rating_life_h"], rel=0.01)   # measured 0.4 %
+
+
+def test_ideal_joint_has_no_life():
+    from mechanism.results import summary
+    from mechanism.run import RunConfig, run
+    r = run(RunConfig(rpm=1200.0, revs=0.05, joint="ideal", step=1e-4, output_interval=1e-4, progress=False))
+    assert summary(r)["life"] is None

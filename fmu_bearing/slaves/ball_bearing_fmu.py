@@ -55,25 +55,8 @@ _INPUT_VRS = list(range(len(INPUTS)))
 CAGE_ANGLE = ("cage_angle", "rad",
               "angle of ball 1 (ball r at cage_angle + 2 pi (r-1)/n_balls), time integral of the cage speed (eq. 16)")
 
-#: load ratings, computed from the parameters at initialisation: (name, unit, description, LoadRatings field)
-RATING_OUTPUTS = (
-    ("dynamic_load_rating", "N", "basic dynamic radial load rating C_r (ISO 281 eq. 2, b_m = 1.3), from the "
-                                 "geometry at initialisation", "C_r"),
-    ("raceway_rating_inner", "N", "basic dynamic load rating Q_ci of the inner raceway contact (ISO/TS 16281)", "Q_ci"),
-    ("raceway_rating_outer", "N", "basic dynamic load rating Q_ce of the outer raceway contact (ISO/TS 16281)", "Q_ce"),
-)
-#: life outputs accumulated over the simulated time (docs/bearing-life.md): (name, unit, description, property)
-LIFE_OUTPUTS = (
-    ("equivalent_load_inner", "N", "equivalent rolling-element load Q_ei of the inner ring over the simulated "
-                                   "history (ISO/TS 16281); 0 before any ball is loaded", "equivalent_load_inner"),
-    ("equivalent_load_outer", "N", "equivalent rolling-element load Q_ee of the outer ring over the simulated "
-                                   "history (ISO/TS 16281); 0 before any ball is loaded", "equivalent_load_outer"),
-    ("rating_life", "h", "reference rating life L10r (x reliability_factor) at the mean relative ring speed of "
-                         "the simulated history; +inf (infinite life) before any ball is loaded", "life_hours"),
-    ("rating_life_revolutions", "Mrev", "reference rating life L10r (x reliability_factor) in millions of "
-                                        "revolutions of one ring relative to the other; +inf before any ball is "
-                                        "loaded", "life_revolutions"),
-)
+#: load ratings and life outputs (name, unit, description, source): one home in fmu_bearing.life
+RATING_OUTPUTS, LIFE_OUTPUTS = life.RATING_OUTPUTS, life.LIFE_OUTPUTS
 #: key of the life accumulator's sums in the FMU state
 _LIFE_STATE = "__life_accumulator__"
 
