@@ -79,3 +79,19 @@ def test_ideal_joint_has_no_life():
     from mechanism.run import RunConfig, run
     r = run(RunConfig(rpm=1200.0, revs=0.05, joint="ideal", step=1e-4, output_interval=1e-4, progress=False))
     assert summary(r)["life"] is None
+
+
+def test_reproduction_report_has_a_life_table(tmp_path):
+    """A two-revolution run (3000 rpm keeps it short) gets a steady-cycle and a whole-run life in the report."""
+    from mechanism.run import RunConfig
+    from mechanism.studies import reproduce as rp
+    spec = rp.RunSpec("bearing-3000", "bearing", "bearing",
+                      RunConfig(joint="bearing", rpm=3000.0, revs=2.0, balls=8, progress=False))
+    rp.reproduce(tmp_path, specs=[spec], workers=1, progress=False)
+    text = (tmp_path / "report" / "README.md").read_text()
+    table = text[text.index("## Bearing rating life per operating point"):].split("\n\n")[2]
+    row = next(line for line in table.splitlines() if line.startswith("| `bearing-3000`"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    steady_h, whole_h = float(cells[6]), float(cells[7])
+    assert 0 < steady_h < math.inf and 0 < whole_h < math.inf
+    assert whole_h < steady_h        # the start-up transient (the journal drops through the clearance) costs life

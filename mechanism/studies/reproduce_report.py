@@ -328,6 +328,7 @@ class Report:
           "fmpy; the ideal-joint runs use the same master with the ideal revolute joint and no component.")
         w()
         self.section_runs()
+        self.section_life()
         self.section_units()
         self.section_figures()
         self.section_stiffness()
@@ -380,6 +381,52 @@ class Report:
         w(f"This call computed {len(self.outcome.get('computed', []))} run(s) ({total:.1f} s of run time on "
           f"{self.outcome.get('workers', 1)} worker(s), {self.outcome.get('elapsed_s', 0.0):.1f} s elapsed) and took "
           f"{len(self.outcome.get('cached', []))} from the cache.")
+        w()
+
+    def section_life(self):
+        """Bearing rating life per operating point (issue 16, docs/bearing-life.md)."""
+        from ..life import run_life
+        rows = []
+        for name in self.specs:
+            r = self.runs.get(name)
+            if r is None or not r.ok:
+                continue
+            T = crank_period(r)
+            whole = run_life(r)
+            rev2 = run_life(r, (T, 2 * T)) if r["time"][-1] >= 2 * T - 1e-9 else None
+            if whole is None:
+                continue
+            rows.append((name, r.meta["config"]["rpm"], n_balls_of(r), rev2, whole))
+        if not rows:
+            return
+        w = self.w
+        w("## Bearing rating life per operating point")
+        w()
+        first = rows[0][4]
+        steady = [(row[3]["rating_life_h"], row[0]) for row in rows if row[3] is not None]
+        w("Reference rating life L10r (ISO/TS 16281, a_1 = 1, 90 % reliability) from the simulated ball loads "
+          "(docs/bearing-life.md): Q_ei, Q_ee are the equivalent rolling-element loads of the inner and outer "
+          "ring; the outer ring (housing, on the crank) turns faster than the inner ring (on the rod) and is taken "
+          "as the ring rotating relative to the load. *Steady cycle*: the second crank revolution, from the "
+          "recorded ball loads (sampled every step) with the FMU's accumulator class; *whole run*: the FMU's final "
+          "outputs, start-up transient included. Ratings of the Table 2 geometry: "
+          f"C_r = {first['dynamic_load_rating_N']:.0f} N (ISO 281), Q_ci = {first['raceway_rating_inner_N']:.0f} N, "
+          f"Q_ce = {first['raceway_rating_outer_N']:.0f} N (ISO/TS 16281) for {rows[0][2]} balls"
+          + (f"; the shortest steady-cycle life is {min(steady)[0]:.3g} h (`{min(steady)[1]}`)." if steady else ".")
+          + " Runs with 15 and 20 balls are hypothetical (the balls overlap) and rated as if they fitted.")
+        w()
+        def life(x):
+            return "∞" if x == math.inf else _fmt(x)
+
+        w("| run | rpm | balls | Q_ei [N] | Q_ee [N] | L10r [10⁶ rev] | L10r [h] | whole run: L10r [h] |")
+        w("|---|---|---|---|---|---|---|---|")
+        for name, rpm, nb, rev2, whole in rows:
+            if rev2 is None:
+                w(f"| `{name}` | {rpm:g} | {nb} | – | – | – | – | {life(whole['rating_life_h'])} |")
+                continue
+            w(f"| `{name}` | {rpm:g} | {nb} | {_fmt(rev2['equivalent_load_inner_N'])} | "
+              f"{_fmt(rev2['equivalent_load_outer_N'])} | {life(rev2['rating_life_Mrev'])} | "
+              f"{life(rev2['rating_life_h'])} | {life(whole['rating_life_h'])} |")
         w()
 
     def section_units(self):
