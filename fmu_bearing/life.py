@@ -6,7 +6,7 @@ ISO/TS 16281 are written in N and mm; ``_MM`` converts lengths to mm at their ed
 results are in N. The method, the symbols and the limits are in docs/bearing-life.md.
 
 * ``dynamic_load_rating``: basic dynamic radial load rating C_r of a single-row deep-groove ball
-  bearing, ISO 281:2007 eq. (2) with the f_c table (Table 2) and b_m = 1.3 (Table 1).
+  bearing, ISO 281:2007 clause 5.1 with the f_c table (Table 2) and b_m = 1.3 (Table 1).
 * ``raceway_load_ratings``: basic dynamic load ratings Q_ci, Q_ce of the inner and outer raceway
   contacts, ISO/TS 16281:2008 (Lundberg-Palmgren, ISO/TR 1281-1 background), with b_m.
 * ``LifeAccumulator``: equivalent rolling-element loads Q_ei, Q_ee of a simulated load history and
@@ -28,7 +28,7 @@ F_C_TABLE = (29.1, 35.8, 40.3, 43.8, 46.7, 49.1, 51.1, 52.8, 54.3, 55.5,
              56.6, 57.5, 58.2, 58.8, 59.3, 59.6, 59.8, 59.9, 60.0, 59.9,
              59.8, 59.6, 59.3, 59.0, 58.6, 58.2, 57.7, 57.1, 56.6, 56.0,
              55.3, 54.6, 53.9, 53.2, 52.4, 51.7, 50.9, 50.0, 49.2, 48.4)
-#: life exponent p of point contact (ISO 281 eq. (13): L10 = (C/P)^3); also the exponent of the
+#: life exponent p of point contact (ISO 281:2007 clause 5.3: L10 = (C/P)^3); also the exponent of the
 #: rotating ring's equivalent load and of the Palmgren-Miner time average (ISO/TS 16281)
 P_BALL = 3.0
 #: exponent of the stationary ring's equivalent load, p e = 3 x 10/9 (ISO/TS 16281; Weibull e = 10/9)
@@ -40,7 +40,7 @@ HOUR = 3600.0
 #: outputs of the BallBearing FMU (and of the in-process endpoint) from the ratings, computed from the
 #: parameters at initialisation: (name, unit, description, LoadRatings field)
 RATING_OUTPUTS = (
-    ("dynamic_load_rating", "N", "basic dynamic radial load rating C_r (ISO 281 eq. 2, b_m = 1.3), from the "
+    ("dynamic_load_rating", "N", "basic dynamic radial load rating C_r (ISO 281 clause 5.1, b_m = 1.3), from the "
                                  "geometry at initialisation", "C_r"),
     ("raceway_rating_inner", "N", "basic dynamic load rating Q_ci of the inner raceway contact (ISO/TS 16281)", "Q_ci"),
     ("raceway_rating_outer", "N", "basic dynamic load rating Q_ce of the outer raceway contact (ISO/TS 16281)", "Q_ce"),
@@ -84,10 +84,10 @@ def f_c_factor(gamma: float) -> float:
 
 def dynamic_load_rating(ball_diameter: float, pitch_diameter: float, n_balls: int,
                         rows: int = 1, contact_angle: float = 0.0, b_m: float = B_M_RADIAL_BALL) -> float:
-    """Basic dynamic radial load rating C_r [N] of a radial ball bearing, ISO 281:2007 eq. (2)-(3).
+    """Basic dynamic radial load rating C_r [N] of a radial ball bearing, ISO 281:2007 clause 5.1.
 
-    D_w <= 25.4 mm: C_r = b_m f_c (i cos alpha)^0.7 Z^(2/3) D_w^1.8          # ISO 281 eq. (2)
-    D_w >  25.4 mm: C_r = 3.647 b_m f_c (i cos alpha)^0.7 Z^(2/3) D_w^1.4    # ISO 281 eq. (3)
+    D_w <= 25.4 mm: C_r = b_m f_c (i cos alpha)^0.7 Z^(2/3) D_w^1.8          # ISO 281 5.1, D_w <= 25.4 mm
+    D_w >  25.4 mm: C_r = 3.647 b_m f_c (i cos alpha)^0.7 Z^(2/3) D_w^1.4    # ISO 281 5.1, D_w > 25.4 mm
     with D_w in mm and C_r in N (the standard's units; converted here).
     """
     D = ball_diameter * _MM
@@ -126,7 +126,7 @@ def raceway_load_ratings(ball_diameter: float, pitch_diameter: float, n_balls: i
 class LoadRatings:
     """Load ratings of one single-row deep-groove ball bearing (contact angle 0), all in N.
 
-    C_r: basic dynamic radial load rating (ISO 281 eq. 2); Q_ci, Q_ce: basic dynamic load ratings of the
+    C_r: basic dynamic radial load rating (ISO 281 clause 5.1); Q_ci, Q_ce: basic dynamic load ratings of the
     inner and outer raceway contacts (ISO/TS 16281); n_balls: Z; gamma = D/D_pw [-].
     """
 

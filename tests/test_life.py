@@ -20,7 +20,7 @@ REL = 1e-9
 # --- the formulas by hand --------------------------------------------------------------------------
 
 def hand_ratings(D_mm=8.7, dm_mm=37.9, Z=8, fi=0.52, fe=0.52):
-    """C_r, Q_ci, Q_ce written out from ISO 281 eq. (2), Table 2 (rows 0.22 and 0.23) and ISO/TS 16281."""
+    """C_r, Q_ci, Q_ce written out from ISO 281 clause 5.1, Table 2 (rows 0.22 and 0.23) and ISO/TS 16281."""
     g = D_mm / dm_mm                                        # 0.2296: between the rows 0.22 and 0.23
     assert 0.22 < g < 0.23
     fc = 59.6 + (g - 0.22) / 0.01 * (59.3 - 59.6)          # ISO 281 Table 2, linear interpolation
