@@ -47,7 +47,7 @@ def runs(ball_bearing_fmu):
 
 
 def test_summary_life_from_the_fmu_equals_the_in_process_accumulator(runs):
-    from mechanism.results import summary
+    from mechanism.output.results import summary
     fmu, inproc = summary(runs["cosim"])["life"], summary(runs["inprocess"])["life"]
     assert fmu["source"] == inproc["source"] == "component outputs"
     for key in ("equivalent_load_inner_N", "equivalent_load_outer_N", "rating_life_h", "rating_life_Mrev"):
@@ -57,7 +57,7 @@ def test_summary_life_from_the_fmu_equals_the_in_process_accumulator(runs):
 
 def test_fmu_final_outputs_equal_the_recorded_loads_accumulated(runs):
     """The FMU accumulates every step; the samples (every step here) accumulated afterwards agree."""
-    from mechanism.life import run_life
+    from mechanism.output.life import run_life
     r = runs["cosim"]
     t = r["time"]
     fmu = run_life(r)
@@ -68,14 +68,14 @@ def test_fmu_final_outputs_equal_the_recorded_loads_accumulated(runs):
 
 
 def test_monolithic_life_is_close_to_the_cosimulation(runs):
-    from mechanism.results import summary
+    from mechanism.output.results import summary
     mono, fmu = summary(runs["monolithic"])["life"], summary(runs["cosim"])["life"]
     assert mono["source"] == "recorded samples"
     assert mono["rating_life_h"] == pytest.approx(fmu["rating_life_h"], rel=0.01)   # measured 0.4 %
 
 
 def test_ideal_joint_has_no_life():
-    from mechanism.results import summary
+    from mechanism.output.results import summary
     from mechanism.run import RunConfig, run
     r = run(RunConfig(rpm=1200.0, revs=0.05, joint="ideal", step=1e-4, output_interval=1e-4, progress=False))
     assert summary(r)["life"] is None

@@ -6,10 +6,11 @@ FMI variables and calls those functions. The interface is documented in docs/fmu
 
 Step semantics: ``do_step(t, h)`` checks the inputs, advances the cage angle over [t, t + h] with the
 inputs held, and evaluates the force law at the new cage angle, so every output describes the END of
-the step. On an error the message goes to the FMI logger (status error) and the step returns False
-(pythonfmu 0.7: fmi2Discard), leaving the outputs of the last good step untouched (never NaN); invalid
+the step. On an error the message goes to the FMI logger (status error, category logStatusError, also
+when logging is off: ``HostLogger``) and the step returns False (pythonfmu 0.7: fmi2Discard), leaving the
+outputs of the last good step untouched (never NaN); so does a doStep after fmi2Terminate. Invalid
 parameters fail fmi2ExitInitializationMode (pythonfmu 0.7: fmi2Fatal, the only non-OK status it gives
-that call).
+that call). The outputs are computed there: they are declared initial="calculated" (InitialUnknowns).
 
 The per-ball output capacity is a build option (``python build_fmu.py --max-balls N``), read at
 instantiation from ``resources/build_options.json``; ``n_balls`` is a parameter up to that capacity.
@@ -18,9 +19,7 @@ This file is the FMU's slave module: pythonfmu's binary imports it as a top-leve
 the slave class by matching its source lines against a class statement deriving from Fmi2Slave, so
 it uses absolute imports only and no ``from __future__`` import.
 """
-import json
 import math
-import os
 from dataclasses import fields
 from functools import partial
 
@@ -32,12 +31,11 @@ from fmu_bearing import ball_bearing as physics
 from fmu_bearing import life
 from fmu_bearing.parameters import BearingParameters
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
-from fmu_bearing.slaves import add_unit_definitions, guard_pythonfmu_exit, hold_before_raise
+from fmu_bearing.slaves import (HostLogger, add_initial_unknowns, add_unit_definitions, guard_pythonfmu_exit,
+                                hold_before_raise, read_build_options, release_on_free, weak_accessors)
 
 #: per-ball outputs when the FMU was built without an explicit --max-balls
 DEFAULT_CAPACITY = 20
-#: build options written into the FMU's resources folder by build_fmu.py
-BUILD_OPTIONS_FILE = "build_options.json"
 
 #: (name, unit, description) of the inputs, in value-reference order: the joint-component interface
 INPUTS = JOINT_INPUTS
@@ -66,13 +64,7 @@ _INTEGER_RANGES = {"n_balls": (3, None), "damping_model": (0, 2)}
 
 def read_capacity(resources) -> int:
     """Per-ball output capacity from the FMU's resources/build_options.json (DEFAULT_CAPACITY without one)."""
-    if resources:
-        path = os.path.join(str(resources), BUILD_OPTIONS_FILE)
-        if os.path.isfile(path):
-            with open(path, encoding="utf-8") as fh:
-                capacity = int(json.load(fh).get("max_balls", DEFAULT_CAPACITY))
-            return max(capacity, 3)
-    return DEFAULT_CAPACITY
+    return max(int(read_build_options(resources).get("max_balls", DEFAULT_CAPACITY)), 3)
 
 
 class _TypeAttributes:
@@ -85,9 +77,6 @@ class _TypeAttributes:
     def to_xml(self):
         node = super().to_xml()
         node[0].attrib.update(self.type_attributes)
-        start = node[0].get("start")
-        if start in ("inf", "-inf"):  # xs:double spells infinity INF (the life outputs start at +INF)
-            node[0].set("start", start.upper())
         return node
 
 
@@ -107,6 +96,11 @@ def _ignore(value):
     """Setter of a read-only computed output (the FMU state restores its source instead)."""
 
 
+def _life_output(slave, prop):
+    """A life output (LIFE_OUTPUTS) of the slave's accumulator; before initialisation, of an empty one."""
+    return float(getattr(slave._life if slave._life is not None else slave._empty_life, prop))
+
+
 #: key of the state returned for bytes that are not a serialized state (no exception may escape)
 _INVALID_STATE = "__invalid_state__"
 
@@ -121,45 +115,49 @@ class BallBearing(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name)  # errors even with logging off
         guard_pythonfmu_exit(self.resources)
+        release_on_free(self)                      # the last fmi2FreeInstance undoes the FMU's imports
         self.capacity = read_capacity(self.resources)
         self._bearing = None                       # physics.BallBearing, built at exit of initialisation
         self._life = None                          # life.LifeAccumulator, built at exit of initialisation
         self._pending_error = None                 # a refused call, reported by the next doStep
+        self._terminated = False                   # fmi2Terminate was called: no more steps
         self._loads = [0.0] * self.capacity        # ball_load_k outputs (fixed list object: getters bind to it)
         self._scratch = [0.0] * self.capacity      # evaluate() writes here; copied to _loads on success
         self._param_names = tuple(f.name for f in fields(BearingParameters))
 
         cont, fixed, discrete = Fmi2Variability.continuous, Fmi2Variability.fixed, Fmi2Variability.discrete
-        output, exact = Fmi2Causality.output, Fmi2Initial.exact
+        output, calculated = Fmi2Causality.output, Fmi2Initial.calculated   # outputs: computed at initialisation
         for name, unit, desc in INPUTS:
             self._register(RealVariable, name, 0.0, desc, {"unit": unit},
                            causality=Fmi2Causality.input, variability=cont)
         for name, unit, desc in FORCE_OUTPUTS:
             if unit is None:
                 self._register(IntegerVariable, name, 0, desc, None,
-                               causality=output, variability=discrete, initial=exact)
+                               causality=output, variability=discrete, initial=calculated)
             else:
                 self._register(RealVariable, name, 0.0, desc, {"unit": unit},
-                               causality=output, variability=cont, initial=exact)
+                               causality=output, variability=cont, initial=calculated)
         name, unit, desc = CAGE_ANGLE
         self._register(RealVariable, name, float(BearingParameters().cage_angle_start), desc, {"unit": unit},
-                       causality=output, variability=cont, initial=exact)
+                       causality=output, variability=cont, initial=calculated)
         self._empty_life = life.LifeAccumulator(life.LoadRatings.of_bearing(BearingParameters()))
         for name, unit, desc, field in RATING_OUTPUTS:
             self._register(RealVariable, name, float(getattr(self._empty_life.ratings, field)), desc, {"unit": unit},
-                           causality=output, variability=discrete, initial=exact)
+                           causality=output, variability=discrete, initial=calculated)
         # Life outputs are computed from the accumulator when read (not every step); the FMU state restores
-        # the accumulator itself, so their setters ignore the saved values.
+        # the accumulator itself, so their setters ignore the saved values. Weak: see weak_accessors.
+        proxy = self.__dict__["_weak_self"]
         for name, unit, desc, prop in LIFE_OUTPUTS:
             self.register_variable(RealVariable(
                 name, type_attributes={"unit": unit}, description=desc, causality=output, variability=cont,
-                initial=exact, getter=partial(self._life_output, prop), setter=_ignore))
+                initial=calculated, getter=partial(_life_output, proxy, prop), setter=_ignore))
         # Parameters: one per BearingParameters field, with its default, unit and description;
         # the FMI type follows the default's Python type (bool -> Boolean, int -> Integer, else Real).
         for f in fields(BearingParameters):
             desc = f.metadata.get("description", f.name)
-            kwargs = dict(causality=Fmi2Causality.parameter, variability=fixed, initial=exact)
+            kwargs = dict(causality=Fmi2Causality.parameter, variability=fixed, initial=Fmi2Initial.exact)
             if isinstance(f.default, bool):
                 self._register(BooleanVariable, f.name, bool(f.default), desc, None, **kwargs)
             elif isinstance(f.default, int):
@@ -176,7 +174,7 @@ class BallBearing(Fmi2Slave):
             self.register_variable(RealVariable(
                 f"ball_load_{k + 1}", type_attributes={"unit": "N"},
                 description=f"load on ball {k + 1} (0 outside the load zone, and for balls beyond n_balls)",
-                causality=output, variability=cont, initial=exact,
+                causality=output, variability=cont, initial=calculated,
                 getter=partial(loads.__getitem__, k), setter=partial(loads.__setitem__, k)))
         assert [self.vars[vr].name for vr in _INPUT_VRS] == [name for name, _, _ in INPUTS]
         # Value reference -> getter/setter maps for the fast paths. Before initialisation every
@@ -189,18 +187,19 @@ class BallBearing(Fmi2Slave):
     # --- registration helpers (build time and instantiation only) ------------------------------
     def _register(self, cls, name, start, description, type_attributes, **kwargs):
         setattr(self, name, start)
+        getter, setter = weak_accessors(self, name)
         self.register_variable(cls(name, type_attributes=type_attributes, description=description,
-                                   getter=partial(getattr, self, name), setter=partial(setattr, self, name),
-                                   **kwargs))
+                                   getter=getter, setter=setter, **kwargs))
 
     def _setters(self, kind, causalities):
         return {vr: v.setter for vr, v in self.vars.items()
                 if isinstance(v, kind) and (causalities is None or v.causality in causalities)}
 
     def to_xml(self, model_options=dict()):
-        """pythonfmu's modelDescription plus <UnitDefinitions> for every unit the variables use."""
+        """pythonfmu's modelDescription plus <UnitDefinitions> and the outputs as <InitialUnknowns>."""
         root = super().to_xml(model_options)
         add_unit_definitions(root, self.vars.values())
+        add_initial_unknowns(root, self.vars.values())
         return root
 
     # --- FMI ----------------------------------------------------------------------------------
@@ -222,7 +221,9 @@ class BallBearing(Fmi2Slave):
                 raise FloatingPointError(message)
         except Exception as err:
             self._bearing = None
-            self._error(f"initialisation failed: {err}")
+            # To the host directly (also with logging off), not through pythonfmu's queue: pythonfmu then
+            # logs the exception itself (logging on) instead of "unknown error" after a queued message.
+            self._host_log(3, f"initialisation failed: {err}")
             hold_before_raise(self)  # pythonfmu 0.7 over-releases objects on the exception path
             raise  # -> fmi2ExitInitializationMode returns fmi2Fatal (pythonfmu 0.7 has no route to fmi2Error)
         self._bearing = bearing
@@ -236,7 +237,8 @@ class BallBearing(Fmi2Slave):
     def do_step(self, current_time, step_size):
         bearing = self._bearing
         if bearing is None or self._pending_error is not None:
-            reason = self._pending_error or "the instance is not initialised"
+            reason = self._pending_error or ("the instance was terminated (fmi2Terminate)" if self._terminated
+                                             else "the instance is not initialised")
             self._pending_error = None
             return self._refuse_step(current_time, reason)
         w_i, w_o = self.omega_inner, self.omega_outer
@@ -255,6 +257,9 @@ class BallBearing(Fmi2Slave):
             return self._refuse_step(current_time, f"life accumulation failed: {err!r}")
         return True
 
+    def terminate(self):
+        self._terminated, self._bearing = True, None   # a later doStep is refused (fmi2Discard, logged)
+
     @staticmethod
     def _new_life(params):
         """A LifeAccumulator for ``params`` (raises life.LifeInputError outside ISO 281's range)."""
@@ -265,9 +270,6 @@ class BallBearing(Fmi2Slave):
         for name, _, _, field in RATING_OUTPUTS:
             setattr(self, name, float(getattr(ratings, field)))
 
-    def _life_output(self, prop):
-        """A life output (LIFE_OUTPUTS) of the accumulator; before initialisation, of an empty one."""
-        return float(getattr(self._life if self._life is not None else self._empty_life, prop))
 
     def _refuse_step(self, current_time, reason):
         self._error(f"doStep at t = {current_time!r} s refused: {reason}")
@@ -289,8 +291,10 @@ class BallBearing(Fmi2Slave):
         return None
 
     def _error(self, message):
-        # The FMI logger's message is a printf format: escape '%'.
-        self.log(str(message).replace("%", "%%"), Fmi2Status.error)
+        """An error message to the host: directly (category logStatusError, also with logging off), else
+        through pythonfmu's queue (only with logging on). The FMI logger's message is a printf format."""
+        if not self._host_log(3, message):
+            self.log(str(message).replace("%", "%%"), Fmi2Status.error)
 
     # --- fast paths: pythonfmu loops over Fmi2Slave.vars with isinstance checks per value --------
     def get_real(self, vrs):

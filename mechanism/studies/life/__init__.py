@@ -2,8 +2,9 @@
 
 Rating life L10r (ISO/TS 16281, docs/bearing-life.md) of the paper's slider-crank against the radial
 clearance (preload to several times the paper's 20 µm) and against the crank speed; CSV tables and PNG
-plots. ``sweep`` runs the points, ``output`` writes the files, ``cli`` registers the subcommand.
+plots. ``cases`` holds the operating points, ``runs`` runs them, ``tables`` and ``figures`` write the files,
+``cli`` registers the subcommand.
 """
-from .cli import register
+from mechanism.studies.life.cli import register
 
 __all__ = ["register"]
