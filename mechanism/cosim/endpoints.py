@@ -24,6 +24,7 @@ import shutil
 from pathlib import Path
 from typing import Mapping, Sequence
 
+from fmu_bearing import life
 from fmu_bearing.ball_bearing import BallBearing, BearingInputError
 from fmu_bearing.interface import COUPLING_OUTPUT_NAMES, JOINT_INPUT_NAMES
 from fmu_bearing.parameters import BearingParameters, from_values
@@ -50,6 +51,8 @@ class InProcessEndpoint:
             params = from_values(parameters)
         self.bearing = BallBearing(params, capacity)
         self.n_balls = self.bearing.n_balls
+        # the FMU's life outputs too, from the same accumulator (docs/bearing-life.md)
+        self.life = life.LifeAccumulator(life.LoadRatings.of_bearing(params), params.reliability_factor)
         self.sample_names = ("cage_angle", "loaded_balls", "max_ball_load") + tuple(
             f"ball_load_{r + 1}" for r in range(self.n_balls))
         self.calls = 0
@@ -75,6 +78,7 @@ class InProcessEndpoint:
         self._inputs = (ex, ey, vx, vy, wi, wo)
         self._cage = self.bearing.advance_cage(self._cage, wi, wo, h)
         self._evaluate()
+        self.life.add(self._loads, wi, wo, h)
         return self._out[:8]
 
     def _evaluate(self) -> None:
@@ -85,12 +89,17 @@ class InProcessEndpoint:
         out = self._out
         return [self._cage, float(out.loaded_balls), out.max_ball_load, *self._loads]
 
+    def life_outputs(self) -> dict[str, float]:
+        """The FMU's life outputs (``fmu_bearing.life.LIFE_NAMES``) from the in-process accumulator."""
+        return dict(zip(life.LIFE_NAMES, life.output_values(self.life)))
+
     def get_state(self):
-        return (self._cage, self._inputs, self._out, list(self._loads))
+        return (self._cage, self._inputs, self._out, list(self._loads), self.life.state())
 
     def set_state(self, state) -> None:
-        self._cage, self._inputs, self._out, loads = state
+        self._cage, self._inputs, self._out, loads, sums = state
         self._loads[:] = loads
+        self.life.restore(sums)
 
     def free_state(self, state) -> None:
         pass
@@ -155,6 +164,17 @@ class _FmuBase:
             out = out + (0.0,) * (8 - len(out))
         return out
 
+    def life_outputs(self) -> dict[str, float] | None:
+        """The FMU's life outputs now (``fmu_bearing.life.LIFE_NAMES``), None if it has none or cannot say."""
+        names = [n for n in life.LIFE_NAMES if n in self.variables]
+        if not names or not self._instantiated:
+            return None
+        get = getattr(self.fmu, "getReal", None) or self.fmu.getFloat64
+        try:
+            return dict(zip(names, get([self.variables[n].valueReference for n in names])))
+        except Exception:
+            return None
+
     def get_state(self):
         try:
             return self.fmu.getFMUState()
@@ -201,8 +221,10 @@ class FmuEndpoint(_FmuBase):
         from fmpy.fmi2 import FMU2Slave
 
         super().__init__(fmu_path, start_values, "2.")
+        # life outputs are run-level figures, read once at the end (life_outputs), not sampled
         self.sample_names = tuple(v.name for v in self.md.modelVariables
-                                  if v.causality == "output" and v.name not in self.coupling_names)
+                                  if v.causality == "output" and v.name not in self.coupling_names
+                                  and v.name not in life.LIFE_NAMES)
 
         def _log(component, instance, status, category, message):
             self._message(status, message)
