@@ -18,7 +18,8 @@ INT_MIN, INT_MAX = -2**31, 2**31 - 1
 
 
 def variable_kinds(slave) -> dict:
-    """{name: "Real" | "Integer" | "Boolean" | "String"} of the slave's registered variables."""
+    """{name: "Real" | "Integer" | "Boolean" | "String"} of the slave's registered variables ("Real" must be
+    finite; a slave marks a Real that may be infinite, e.g. a life without load, as "Real or inf")."""
     kinds = {}
     for var in slave.vars.values():
         for cls, kind in ((Real, "Real"), (Integer, "Integer"), (Boolean, "Boolean"), (String, "String")):
@@ -29,7 +30,10 @@ def variable_kinds(slave) -> dict:
 
 
 def _value_problem(name: str, kind: str, value):
-    if kind == "Real":
+    if kind == "Real or inf":
+        if type(value) not in (int, float) or math.isnan(value):
+            return f"{name} = {value!r} is not a Real"
+    elif kind == "Real":
         if type(value) not in (int, float) or not math.isfinite(value):
             return f"{name} = {value!r} is not a finite Real"
     elif kind == "Integer":
@@ -47,7 +51,8 @@ def check_state(state, kinds: dict, model: str, fixed: dict = None, extra=()):
     """The first problem of ``state`` as a state of this instance, or None if it can be assigned.
 
     ``kinds``: the registered variables (``variable_kinds``); their keys must all be present, of their
-    type and finite. ``extra``: further keys the slave saves itself (checked by the slave). ``fixed``:
+    type and finite ("Real or inf": not NaN). ``extra``: further keys the slave may save itself (allowed, not
+    required; checked by the slave). ``fixed``:
     name -> current value of the variables that may not change (the parameters of an initialised
     instance, e.g. n_balls: a state of an instance with other parameters is not ours).
     """
@@ -57,7 +62,7 @@ def check_state(state, kinds: dict, model: str, fixed: dict = None, extra=()):
     unknown = sorted(str(k) for k in state if k not in allowed)
     if unknown:
         return f"not a {model} state of this build: unknown key {unknown[0]!r}"
-    missing = [k for k in kinds if k not in state] + [k for k in extra if k not in state]
+    missing = [k for k in kinds if k not in state]
     if missing:
         return f"not a {model} state of this build: no value for {missing[0]!r} (another per-ball capacity?)"
     for name, kind in kinds.items():

@@ -1,10 +1,12 @@
 """The SSP in other FMI tools: fmpy (fmpy.ssp), libcosim (libcosimpy) and ecos (ecospy).
 
 All three are fixed-step Jacobi masters running the two FMUs; ``simulate_with`` checks the archive
-first and returns the recorded outputs as arrays.
+first and returns the recorded outputs as arrays. A named parameter set is the variant SSD ``<name>.ssd``
+of the archive; each tool reads it itself (see ``simulate_with``).
 """
 from __future__ import annotations
 
+import atexit
 import math
 from pathlib import Path
 
@@ -32,34 +34,39 @@ def simulate_with(tool: str, ssp: str | Path, parameter_set: str | None = None, 
                   t_end: float = 0.01, record=RECORD) -> dict[str, np.ndarray]:
     """Run the SSP in ``tool`` (fmpy, libcosim, ecos) with a fixed step; the archive is checked first.
 
-    Returns "time" (the end of each step, h ... t_end) and each recorded output at those times.
+    Each tool reads the parameter set from the SSD itself, none is handed values by us: the default set from
+    the archive's SystemStructure.ssd, another from its variant SSD ``<name>.ssd`` (libcosim: the .ssd path
+    in the unpacked archive; ecos, which reads only a SystemStructure.ssd: the unpacked archive with the
+    variant in its place; fmpy.ssp, which parses bindings but applies none: every binding of the SSD as
+    fmpy parses it, in order, passed as its parameter set). Returns "time" (the end of each step,
+    h ... t_end) and each recorded output at those times.
+
     Raises ``ToolRunFailed`` (with the rows before the failure) when the tool fails a step, or when the
-    run diverged or the bearing refused steps although the tool went on (``check_run``).
+    run diverged or the bearing refused steps although the tool went on (``check_run``): a tool that
+    ignores a refused doStep would otherwise report a wrong trajectory as a result.
     """
     if tool not in TOOLS:
         raise ValueError(f"unknown tool {tool!r}; choose from {', '.join(TOOLS)}")
-    if not (math.isfinite(step) and 0 < step <= t_end and math.isfinite(t_end)):
+    if not (math.isfinite(step) and math.isfinite(t_end) and 0 < step <= t_end):
         raise ValueError(f"step {step!r} s and end time {t_end!r} s: need 0 < step <= end time, both finite")
     with sm.load_ssp(ssp, parameter_set) as system:
         name = system.check_parameter_set(parameter_set)
-        values = system.parameters(name)
-        bearing = system.component_of_model("BallBearing").name
+        ssd = system.ssd
+        bearing_values = system.parameters(name).get(system.component_of_model("BallBearing").name, {})
     n_steps = int(round(t_end / step))
     runner = {"fmpy": _run_fmpy, "libcosim": _run_libcosim, "ecos": _run_ecos}[tool]
     record = list(record)
     out = {k: np.full(n_steps, np.nan) for k in record}
     try:
-        done = runner(str(ssp), name, values, step, n_steps, record, out)
-        cause = None
+        done, cause = runner(str(ssp), name, ssd, step, n_steps, record, out), None
     except Exception as err:   # the tool's own error; ``out`` holds the steps it completed
         done, cause = getattr(err, "steps_done", 0), " ".join(f"{type(err).__name__}: {err}".split())
     out["time"] = step * np.arange(1, n_steps + 1)
-    bad = check_run(out, values.get(bearing, {}), done)
+    bad = check_run(out, bearing_values, done)
     if bad is not None and (cause is None or bad[0] < done):
         done, cause = bad
     if cause is not None:
-        partial = {k: v[:done] for k, v in out.items()}
-        raise ToolRunFailed(tool, done + 1, (done + 1) * step, cause, partial)
+        raise ToolRunFailed(tool, done + 1, (done + 1) * step, cause, {k: v[:done] for k, v in out.items()})
     return out
 
 
@@ -72,8 +79,9 @@ def check_run(out: dict[str, np.ndarray], bearing_values: dict, done: int) -> tu
     rings that separate, eq. 18.)"""
     from fmu_bearing.parameters import from_values
     p = from_values(bearing_values)
-    ex, ey = out["mechanism.e_x"][:done], out["mechanism.e_y"][:done]
-    fx, fy = out["bearing.F_x"][:done], out["bearing.F_y"][:done]
+    zero = np.zeros(done)   # a record without e or F: those checks find nothing
+    ex, ey = (out.get(f"mechanism.{n}", zero)[:done] for n in ("e_x", "e_y"))
+    fx, fy = (out.get(f"bearing.{n}", zero)[:done] for n in ("F_x", "F_y"))
     e, force = np.hypot(ex, ey), np.hypot(fx, fy)
     finite = np.all(np.isfinite(np.column_stack([v[:done] for v in out.values()])), axis=1)
     # Jacobi: the force after step k comes from the inputs held over it, the mechanism's e after step k - 1
@@ -92,31 +100,67 @@ def check_run(out: dict[str, np.ndarray], bearing_values: dict, done: int) -> tu
     return k, f"{cause}: |e| = {e[k]:.6g} m, |F| = {force[k]:.6g} N"
 
 
-def _run_fmpy(ssp, name, values, step, n_steps, record, out) -> int:
-    """fmpy.ssp.simulate_ssp: fixed-step Jacobi; it applies no parameter binding itself, so the set is passed.
+def _unpacked(ssp: str, ssd: str | None = None) -> Path:
+    """The archive unpacked into a temporary folder (removed at exit); with ``ssd``, that SSD also replaces
+    the folder's SystemStructure.ssd (for tools that read no other SSD)."""
+    import shutil
+    import tempfile
+    import zipfile
+    folder = Path(tempfile.mkdtemp(prefix="ssp_variant_"))
+    atexit.register(shutil.rmtree, folder, True)
+    with zipfile.ZipFile(ssp) as z:
+        z.extractall(folder)   # load_ssp has checked the members
+    if ssd is not None and ssd != sm.SSD_IN_ARCHIVE:
+        shutil.copyfile(folder / ssd, folder / sm.SSD_IN_ARCHIVE)
+    return folder
 
-    Each step's values are taken from the connectors as the next step starts (``do_step`` wrapped), so
-    the rows before a failing step are kept."""
+
+def fmpy_parameter_set(ssp: str, ssd: str = sm.SSD_IN_ARCHIVE):
+    """fmpy's ParameterSet of an SSD of the archive: every ParameterBinding as fmpy.ssp parses it, applied in
+    order (SSP 1.0), each value converted to the type its .ssv declares (fmpy.ssp applies no binding itself,
+    and its set_value turns any Boolean text, "false" included, into true)."""
+    import zipfile
+    from fmpy.ssp.ssd import Parameter, ParameterSet, handle_system, ns
+    from lxml import etree
+
+    with zipfile.ZipFile(ssp) as z:
+        root = etree.parse(z.open(ssd)).getroot()
+    system = handle_system(root.find("ssd:System", namespaces=ns), filename=ssp)
+    convert = {"Real": float, "Integer": int, "Boolean": lambda text: text.strip().lower() in ("true", "1")}
+    values, names = {}, []
+    for component in system.elements:
+        for binding in component.parameterBindings:
+            for pset in binding.parameterValues:
+                names.append(pset.name)
+                for p in pset.parameters:
+                    values[f"{component.name}.{p.name}"] = convert.get(p.type, str)(p.value)
+    name = names[-1] if names else None
+    return ParameterSet(name=name, parameters=[Parameter(name=k, value=v) for k, v in values.items()])
+
+
+def _run_fmpy(ssp, name, ssd, step, n_steps, record, out) -> int:
+    """fmpy.ssp.simulate_ssp: fixed-step Jacobi on the archive's SystemStructure.ssd (variants share its
+    components and connections), with the SSD's bindings as fmpy parses them (``fmpy_parameter_set``).
+
+    Each step's values are also taken from the connectors as the next step starts (fmpy's ``do_step``
+    wrapped), so the rows before a step that raises are kept. Returns the number of steps made."""
     from fmpy.ssp import simulation
-    from fmpy.ssp.ssd import Parameter, ParameterSet
 
-    pset = ParameterSet(name=name)
-    for component, params in values.items():
-        for pname, value in params.items():
-            pset.parameters.append(Parameter(name=f"{component}.{pname}", value=value))
+    pset = fmpy_parameter_set(ssp, ssd)
+    if pset.name != name:
+        raise RuntimeError(f"fmpy.ssp read parameter set {pset.name!r} from {ssd}, expected {name!r}")
     rows, first, original = [], [], simulation.do_step
 
     def do_step(component, time, step_size):
         if not first:
             first.append(component.name)
-        if component.name == first[0] and rows is not None and time > 0.5 * step_size:
-            connectors = {f"{c.parent.name}.{c.name}": c.value for c in _all_connectors(component)}
-            _store(out, len(rows), record, connectors)
+        if component.name == first[0] and time > 0.5 * step_size and len(rows) < n_steps:
+            values = {f"{c.parent.name}.{c.name}": c.value
+                      for comp in component.parent.elements for c in comp.connectors}
+            for key in record:
+                out[key][len(rows)] = float(values.get(key, np.nan))
             rows.append(time)
         return original(component, time, step_size)
-
-    def _all_connectors(component):
-        return [c for comp in component.parent.elements for c in comp.connectors]
 
     simulation.do_step = do_step
     try:
@@ -134,15 +178,9 @@ def _run_fmpy(ssp, name, values, step, n_steps, record, out) -> int:
     return n_steps
 
 
-def _store(out, k, record, values) -> None:
-    if k < len(next(iter(out.values()))):
-        for key in record:
-            out[key][k] = float(values.get(key, np.nan))
-
-
-def _run_libcosim(ssp, name, values, step, n_steps, record, out) -> int:
-    """libcosim (libcosimpy): fixed-step Jacobi. Through libcosimc it applies each component's first
-    binding (the default set); another set's values are applied as initial values."""
+def _run_libcosim(ssp, name, ssd, step, n_steps, record, out) -> int:
+    """libcosim (libcosimpy): fixed-step Jacobi. It reads an archive's SystemStructure.ssd, or the .ssd file
+    it is given (a variant, in the unpacked archive), and applies the bindings there."""
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimObserver import CosimObserver
@@ -151,25 +189,16 @@ def _run_libcosim(ssp, name, values, step, n_steps, record, out) -> int:
     step_ns = int(round(step * 1e9))
     if abs(step_ns * 1e-9 - step) > 1e-15:
         raise ValueError(f"libcosim counts time in ns: step {step!r} s is not a whole number of ns")
-    execution = CosimExecution.from_ssp_file(str(ssp), step_size=step_ns)
+    source = str(ssp) if ssd == sm.SSD_IN_ARCHIVE else str(_unpacked(ssp) / ssd)
+    execution = CosimExecution.from_ssp_file(source, step_size=step_ns)
     observer = CosimObserver.create_last_value()
     execution.add_observer(observer)
     index, refs, kinds = {}, {}, {}
-    for component in {k.split(".")[0] for k in record} | set(values):
+    for component in {k.split(".")[0] for k in record}:
         index[component] = execution.slave_index_from_instance_name(component)
         for v in execution.slave_variables(index[component]):
             refs[f"{component}.{v.name.decode()}"] = v.reference
             kinds[f"{component}.{v.name.decode()}"] = v.type
-    if name != sm.DEFAULT_PARAMETER_SET:
-        for component, params in values.items():
-            for pname, value in params.items():
-                key, i = f"{component}.{pname}", index[component]
-                if isinstance(value, bool):
-                    execution.boolean_initial_value(i, refs[key], value)
-                elif isinstance(value, int):
-                    execution.integer_initial_value(i, refs[key], value)
-                else:
-                    execution.real_initial_value(i, refs[key], float(value))
     from libcosimpy.CosimEnums import CosimVariableType
     for k in range(n_steps):
         if not execution.step(1):
@@ -185,17 +214,20 @@ def _run_libcosim(ssp, name, values, step, n_steps, record, out) -> int:
     return n_steps
 
 
-def _run_ecos(ssp, name, values, step, n_steps, record, out) -> int:
-    """ecos (ecospy): fixed-step Jacobi; applies the named parameter set of the SSP."""
+def _run_ecos(ssp, name, ssd, step, n_steps, record, out) -> int:
+    """ecos (ecospy): fixed-step Jacobi. It reads only a SystemStructure.ssd (of an archive or a folder) and
+    applies the bindings whose set is named at init (none without a name): a variant is run from the
+    unpacked archive with the variant as its SystemStructure.ssd."""
     from ecospy import EcosSimulation
     from ecospy.lib import EcosLib
 
     EcosLib.set_log_level("err")
-    sim = EcosSimulation(step_size=step, ssp_path=str(ssp))
+    source = str(ssp) if ssd == sm.SSD_IN_ARCHIVE else str(_unpacked(ssp, ssd))
+    sim = EcosSimulation(step_size=step, ssp_path=source)
     try:
         sim.init(parameter_set=name)
         ids = [k.replace(".", "::", 1) for k in record]
-        ints = {k for k in record if k.endswith("loaded_balls")}
+        ints = {k for k in record if k.endswith(("loaded_balls", "n_balls"))}
         k = 0
         try:
             for k in range(n_steps):

@@ -358,6 +358,9 @@ class SliderCrank(Fmi2Slave):
                               extra=("_y", "_published", "_history"))
         if problem is not None:
             return problem
+        missing = [k for k in ("_y", "_published", "_history") if k not in state]
+        if missing:
+            return f"not a SliderCrank state: no value for {missing[0]!r}"
         y, width = state["_y"], len(fields(Exchanged))
         if started and not finite_rows([y], 2 * self._n, 1):
             return f"_y is not the mechanism state of {2 * self._n} finite numbers"
