@@ -19,7 +19,6 @@ This file is the FMU's slave module: pythonfmu's binary imports it as a top-leve
 the slave class by matching its source lines against a class statement deriving from Fmi2Slave, so
 it uses absolute imports only and no ``from __future__`` import.
 """
-import math
 from dataclasses import fields
 from functools import partial
 
@@ -33,6 +32,7 @@ from fmu_bearing.parameters import BearingParameters
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
 from fmu_bearing.slaves import (HostLogger, add_initial_unknowns, add_unit_definitions, guard_pythonfmu_exit,
                                 hold_before_raise, read_build_options, release_on_free, weak_accessors)
+from fmu_bearing.slaves.stepping import BearingStepping
 
 #: per-ball outputs when the FMU was built without an explicit --max-balls
 DEFAULT_CAPACITY = 20
@@ -105,7 +105,7 @@ def _life_output(slave, prop):
 _INVALID_STATE = "__invalid_state__"
 
 
-class BallBearing(Fmi2Slave):
+class BallBearing(Fmi2Slave, BearingStepping):
     author = "bearing-cosim contributors"
     description = ("Deep-groove ball bearing with radial clearance (Xu et al., Mech. Mach. Theory 56, 2012): "
                    "force on the housing from the journal eccentricity, per-ball Hertz contact with damping")
@@ -115,7 +115,8 @@ class BallBearing(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name)  # errors even with logging off
+        # errors reach the host even with logging off
+        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name, kwargs.get("resources"))
         guard_pythonfmu_exit(self.resources)
         release_on_free(self)                      # the last fmi2FreeInstance undoes the FMU's imports
         self.capacity = read_capacity(self.resources)
@@ -235,26 +236,15 @@ class BallBearing(Fmi2Slave):
         self._bool_set = self._setters(Boolean, inputs)
 
     def do_step(self, current_time, step_size):
-        bearing = self._bearing
-        if bearing is None or self._pending_error is not None:
-            reason = self._pending_error or ("the instance was terminated (fmi2Terminate)" if self._terminated
-                                             else "the instance is not initialised")
-            self._pending_error = None
-            return self._refuse_step(current_time, reason)
-        w_i, w_o = self.omega_inner, self.omega_outer
-        try:
-            bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, w_i, w_o)
-        except physics.BearingInputError as err:
-            return self._refuse_step(current_time, err)
-        if not step_size >= 0.0:
-            return self._refuse_step(current_time, f"step size {step_size!r} is not >= 0")
-        message = self._evaluate(bearing.advance_cage(self.cage_angle, w_i, w_o, step_size), bearing)
-        if message is not None:
-            return self._refuse_step(current_time, message)
-        try:  # the loads at the end of the step, held over it (docs/bearing-life.md)
-            self._life.add(self._loads, w_i, w_o, step_size)
-        except Exception as err:  # never let an exception reach pythonfmu's C++ side
-            return self._refuse_step(current_time, f"life accumulation failed: {err!r}")
+        reason = self._advance(step_size)  # BearingStepping: check inputs, advance the cage, evaluate
+        if reason is None:
+            try:  # the loads at the end of the step, held over it (docs/bearing-life.md)
+                self._life.add(self._loads, self.omega_inner, self.omega_outer, step_size)
+            except Exception as err:  # never let an exception reach pythonfmu's C++ side
+                reason = f"life accumulation failed: {err!r}"
+        if reason is not None:
+            self._error(f"doStep at t = {current_time!r} s refused: {reason}")
+            return False  # pythonfmu 0.7: fmi2Discard; the outputs keep the values of the last good step
         return True
 
     def terminate(self):
@@ -269,26 +259,6 @@ class BallBearing(Fmi2Slave):
         """Copy the load ratings to their output variables."""
         for name, _, _, field in RATING_OUTPUTS:
             setattr(self, name, float(getattr(ratings, field)))
-
-
-    def _refuse_step(self, current_time, reason):
-        self._error(f"doStep at t = {current_time!r} s refused: {reason}")
-        return False  # pythonfmu 0.7: fmi2Discard; the outputs keep the values of the last good step
-
-    def _evaluate(self, cage_angle, bearing):
-        """Outputs at ``cage_angle`` and the held inputs; on failure return a message and change nothing."""
-        try:
-            r = bearing.evaluate(self.e_x, self.e_y, self.v_x, self.v_y, cage_angle,
-                                 self.omega_inner, self.omega_outer, self._scratch)
-        except Exception as err:  # never let an exception reach pythonfmu's C++ side
-            return f"force law failed: {err!r}"
-        if not math.isfinite(r[0] + r[1] + r[2] + r[3] + r[4] + r[5] + r[6] + r[7] + r[9] + cage_angle):
-            return f"non-finite force law result {tuple(r)} (inputs out of any physical range)"
-        (self.F_x, self.F_y, self.stiffness_xx, self.stiffness_xy, self.stiffness_yy,
-         self.damping_xx, self.damping_xy, self.damping_yy, self.loaded_balls, self.max_ball_load) = r
-        self.cage_angle = cage_angle
-        self._loads[:] = self._scratch
-        return None
 
     def _error(self, message):
         """An error message to the host: directly (category logStatusError, also with logging off), else
