@@ -32,6 +32,7 @@ import ctypes
 import sys
 import weakref
 from dataclasses import fields
+from functools import partial
 
 from pythonfmu3 import (Boolean, DefaultExperiment, Dimension, Fmi3Causality, Fmi3Initial, Fmi3Slave,
                         Fmi3Status, Fmi3StepResult, Fmi3Variability, Float64, Int32, UInt64, Unit)
@@ -42,6 +43,7 @@ from pythonfmu3 import (Boolean, DefaultExperiment, Dimension, Fmi3Causality, Fm
 # logger message naming the cause.
 try:
     from fmu_bearing import ball_bearing as physics
+    from fmu_bearing import life
     from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
     from fmu_bearing.parameters import BearingParameters
     from fmu_bearing.slaves import UNIT_DEFINITIONS, hold_before_raise, release_on_free, weak_accessors
@@ -62,6 +64,21 @@ assert _IMPORT_ERROR is not None or len(FORCE_OUTPUTS) == len(physics.BearingFor
 CAGE_ANGLE = ("cage_angle", "rad",
               "angle of ball 1 (ball r at cage_angle + 2 pi (r-1)/n_balls), time integral of the cage speed (eq. 16)")
 BALL_LOADS = ("ball_loads", "N", "load on ball r = 1..n_balls (0 outside the load zone), end of step (eq. 18)")
+
+#: names of the life outputs computed from the accumulator when read (docs/bearing-life.md)
+_LIFE_OUTPUT_NAMES = frozenset(n for n, _, _, _ in life.LIFE_OUTPUTS) if _IMPORT_ERROR is None else frozenset()
+#: key of the life accumulator's sums in the FMU state
+_LIFE_STATE = "__life_accumulator__"
+
+
+def _ignore(value):
+    """Setter of a read-only computed output (the FMU state restores its source instead)."""
+
+
+def _life_output(slave, prop):
+    """A life output of the slave's accumulator; before initialisation, of an empty one."""
+    return float(getattr(slave._life if slave._life is not None else slave._empty_life, prop))
+
 
 #: upper bound of n_balls (declared as its max): keeps a mistyped value from allocating without limit
 MAX_BALLS = 10_000
@@ -157,6 +174,8 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=0.1, step_size=1e-5)
 
         self._bearing = None           # physics.BallBearing, built at exit of initialisation
+        self._life = None              # life.LifeAccumulator, built at exit of initialisation
+        self._empty_life = life.LifeAccumulator(life.LoadRatings.of_bearing(BearingParameters()))
         self._terminated = False       # fmi3Terminate was called: no more steps
         self._pending_error = None     # a refused call, reported by the next doStep
         self._param_names = tuple(f.name for f in fields(BearingParameters))
@@ -179,6 +198,17 @@ class BallBearing3(Fmi3Slave, BearingStepping):
                 self._register(Float64Variable, name, start, desc, unit=unit, causality=output,
                                variability=cont, initial=calculated)
                 units.add(unit)
+        # bearing life (docs/bearing-life.md), as in the FMI 2.0 FMU: ratings, then accumulated outputs
+        me = weakref.proxy(self)   # the accessors must not keep the slave alive (release_on_free)
+        for name, unit, desc, field in life.RATING_OUTPUTS:
+            self._register(Float64Variable, name, float(getattr(self._empty_life.ratings, field)), desc, unit=unit,
+                           causality=output, variability=discrete, initial=calculated)
+            units.add(unit)
+        for name, unit, desc, prop in life.LIFE_OUTPUTS:
+            self.register_variable(Float64Variable(
+                name, description=desc, unit=unit, causality=output, variability=cont, initial=calculated,
+                getter=partial(_life_output, me, prop), setter=_ignore))
+            units.add(unit)
         # Parameters: one per BearingParameters field, with its default, unit and description; the FMI type
         # follows the default's Python type (bool -> Boolean, int -> Int32, else Float64); n_balls, which sizes
         # ball_loads, is a UInt64 structural parameter.
@@ -200,7 +230,6 @@ class BallBearing3(Fmi3Slave, BearingStepping):
                 self._register(Float64Variable, f.name, float(f.default), desc, unit=unit, **kw)
                 units.add(unit)
         name, unit, desc = BALL_LOADS
-        me = weakref.proxy(self)   # the accessors must not keep the slave alive (release_on_free)
         self._loads_vr = len(self.vars)
         self.register_variable(Float64Array(
             name, [Dimension(valueReference=str(self._n_balls_vr))], unit=unit, description=desc,
@@ -253,6 +282,8 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             if not 3 <= self.n_balls <= MAX_BALLS:
                 raise ValueError(f"invalid parameter n_balls = {self.n_balls}: must lie in [3, {MAX_BALLS}]")
             bearing = physics.BallBearing(self.parameters())  # validates, names the parameter
+            accumulator = life.LifeAccumulator(life.LoadRatings.of_bearing(bearing.params),
+                                               bearing.params.reliability_factor)
             bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer)
             message = self._evaluate(float(bearing.params.cage_angle_start), bearing)
             if message is not None:
@@ -262,11 +293,22 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             self._error(f"initialisation failed: {err}")
             hold_before_raise(self)  # pythonfmu3 over-releases objects on the exception path
             raise  # -> fmi3ExitInitializationMode returns fmi3Fatal (pythonfmu3 has no route to fmi3Error)
-        self._bearing = bearing
+        self._bearing, self._life = bearing, accumulator
+        self._publish_ratings()
         self._set = {vr: v.setter for vr, v in self.vars.items() if v.causality == Fmi3Causality.input}
+
+    def _publish_ratings(self):
+        """Copy the accumulator's load ratings to their output variables."""
+        for name, _, _, field in life.RATING_OUTPUTS:
+            setattr(self, name, float(getattr(self._life.ratings, field)))
 
     def do_step(self, current_time, step_size):
         reason = self._advance(step_size)  # BearingStepping: check inputs, advance the cage, evaluate
+        if reason is None:
+            try:  # the loads at the end of the step, held over it (docs/bearing-life.md)
+                self._life.add(self._loads, self.omega_inner, self.omega_outer, step_size)
+            except Exception as err:  # never let an exception reach pythonfmu3's C++ side
+                reason = f"life accumulation failed: {err!r}"
         if reason is not None:
             self._error(f"doStep at t = {current_time!r} s refused: {reason}")
             return Fmi3StepResult(status=Fmi3Status.discard)  # the outputs keep the values of the last good step
@@ -358,6 +400,8 @@ class BallBearing3(Fmi3Slave, BearingStepping):
     def _get_fmu_state(self):
         state = {v.name: v.getter() for v in self.vars.values()}
         state[_INITIALISED] = self._bearing is not None
+        if self._life is not None:
+            state[_LIFE_STATE] = self._life.state()
         return state
 
     @staticmethod
@@ -372,7 +416,7 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         try:
             message = state.get(_INVALID_STATE) if isinstance(state, dict) else "not a BallBearing3 state"
             if message is None:
-                values, bearing = self._check_state(state)
+                values, bearing, accumulator = self._check_state(state)
         except Exception as err:
             message = f"setFMUState: invalid state ({err!r})"
         if message is not None:
@@ -380,10 +424,13 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             self._pending_error = self._pending_error or message
             return
         for name, value in values.items():
-            if name != "ball_loads":
+            if name != "ball_loads" and name not in _LIFE_OUTPUT_NAMES:
                 setattr(self, name, value)
         self._set_loads(values["ball_loads"])
         self._bearing = bearing
+        if accumulator is not None:
+            self._life = accumulator
+            self._publish_ratings()
         self._set = {vr: v.setter for vr, v in self.vars.items()
                      if v.causality == Fmi3Causality.input or bearing is None and v.causality in
                      (Fmi3Causality.parameter, Fmi3Causality.structuralParameter)}
@@ -406,7 +453,11 @@ class BallBearing3(Fmi3Slave, BearingStepping):
                        else physics.BallBearing(params))
         if len(values["ball_loads"]) != params.n_balls:
             raise ValueError(f"{len(values['ball_loads'])} ball loads for n_balls = {params.n_balls}")
-        return values, bearing
+        accumulator = None
+        if bearing is not None:   # an initialised state carries the life accumulator's sums
+            accumulator = life.LifeAccumulator(life.LoadRatings.of_bearing(params), params.reliability_factor)
+            accumulator.restore(state[_LIFE_STATE])
+        return values, bearing, accumulator
 
 
 _TYPES = {"Float64": Float64, "Int32": Int32, "UInt64": UInt64, "Boolean": Boolean}

@@ -164,6 +164,17 @@ class _FmuBase:
             out = out + (0.0,) * (8 - len(out))
         return out
 
+    def life_outputs(self) -> dict[str, float] | None:
+        """The FMU's life outputs now (``fmu_bearing.life.LIFE_NAMES``), None if it has none or cannot say."""
+        names = [n for n in life.LIFE_NAMES if n in self.variables]
+        if not names or not self._instantiated:
+            return None
+        get = getattr(self.fmu, "getFloat64", None) or self.fmu.getReal   # FMI 3.0 or 2.0
+        try:
+            return dict(zip(names, get([self.variables[n].valueReference for n in names])))
+        except Exception:
+            return None
+
     def get_state(self):
         try:
             return self.fmu.getFMUState()
@@ -290,16 +301,6 @@ class FmuEndpoint(_FmuBase):
             fmu.fmi2GetBoolean(fmu.component, self._vr_sb, len(self._vr_sb), self._val_sb)
         return list(self._val_sr) + [float(x) for x in self._val_si] + [float(bool(x)) for x in self._val_sb]
 
-    def life_outputs(self) -> dict[str, float] | None:
-        """The FMU's life outputs now (``fmu_bearing.life.LIFE_NAMES``), None if it has none or cannot say."""
-        names = [n for n in life.LIFE_NAMES if n in self.variables]
-        if not names or not self._instantiated:
-            return None
-        try:
-            return dict(zip(names, self.fmu.getReal([self.variables[n].valueReference for n in names])))
-        except Exception:
-            return None
-
 
 class Fmu3Endpoint(_FmuBase):
     """An FMI 3.0 bearing FMU driven through fmpy's FMU3Slave, with prebuilt ctypes buffers for the hot path."""
@@ -336,7 +337,8 @@ class Fmu3Endpoint(_FmuBase):
         """[(getter suffix, vr array, value buffer, column names)] per type, in the order Float64, Int32,
         UInt64, Boolean (the FMI 2.0 endpoint's order: Reals, then Integers, then Booleans)."""
         plan = []
-        outputs = [v for v in self.md.modelVariables if v.causality == "output" and v.name not in self.coupling_names]
+        outputs = [v for v in self.md.modelVariables if v.causality == "output" and v.name not in self.coupling_names
+                   and v.name not in life.LIFE_NAMES]   # life: read once at the end (life_outputs)
         for type_name, (ctype, suffix) in _SAMPLE_TYPES.items():
             names, vrs, count = [], [], 0
             for v in outputs:
