@@ -9,6 +9,10 @@ The same physics, inputs, coupling outputs and parameters as the FMI 2.0 ``BallB
   integers ``Int32``; every unit is registered in ``<UnitDefinitions>`` (pythonfmu3 writes none by itself);
 * outputs are ``initial="calculated"``: they are computed when initialisation ends.
 
+The bearing-life outputs are the FMI 2.0 FMU's (docs/bearing-life.md, ``fmu_bearing.life``): the load ratings
+computed at initialisation, the life accumulated per step from the end-of-step loads (``BearingStepping``), +inf
+before any ball is loaded, the accumulator's sums in the FMU state (checked with the rest before any assignment).
+
 All physics lives in ``fmu_bearing.ball_bearing`` (``BallBearing``: ``check_inputs``, ``advance_cage``,
 ``evaluate``) and ``fmu_bearing.parameters``; this module only declares variables and calls those.
 Step semantics are those of the FMI 2.0 FMU: ``do_step`` checks the inputs, advances the cage angle over
@@ -47,7 +51,7 @@ try:
     from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
     from fmu_bearing.parameters import BearingParameters
     from fmu_bearing.slaves import UNIT_DEFINITIONS, hold_before_raise, release_on_free, weak_accessors
-    from fmu_bearing.slaves.stepping import BearingStepping
+    from fmu_bearing.slaves.stepping import LIFE_STATE, BearingStepping, ignore_value, life_output
     _IMPORT_ERROR = None
 except Exception as _err:  # noqa: BLE001 - reported at instantiation
     _IMPORT_ERROR = _err
@@ -64,21 +68,6 @@ assert _IMPORT_ERROR is not None or len(FORCE_OUTPUTS) == len(physics.BearingFor
 CAGE_ANGLE = ("cage_angle", "rad",
               "angle of ball 1 (ball r at cage_angle + 2 pi (r-1)/n_balls), time integral of the cage speed (eq. 16)")
 BALL_LOADS = ("ball_loads", "N", "load on ball r = 1..n_balls (0 outside the load zone), end of step (eq. 18)")
-
-#: names of the life outputs computed from the accumulator when read (docs/bearing-life.md)
-_LIFE_OUTPUT_NAMES = frozenset(n for n, _, _, _ in life.LIFE_OUTPUTS) if _IMPORT_ERROR is None else frozenset()
-#: key of the life accumulator's sums in the FMU state
-_LIFE_STATE = "__life_accumulator__"
-
-
-def _ignore(value):
-    """Setter of a read-only computed output (the FMU state restores its source instead)."""
-
-
-def _life_output(slave, prop):
-    """A life output of the slave's accumulator; before initialisation, of an empty one."""
-    return float(getattr(slave._life if slave._life is not None else slave._empty_life, prop))
-
 
 #: upper bound of n_balls (declared as its max): keeps a mistyped value from allocating without limit
 MAX_BALLS = 10_000
@@ -175,7 +164,6 @@ class BallBearing3(Fmi3Slave, BearingStepping):
 
         self._bearing = None           # physics.BallBearing, built at exit of initialisation
         self._life = None              # life.LifeAccumulator, built at exit of initialisation
-        self._empty_life = life.LifeAccumulator(life.LoadRatings.of_bearing(BearingParameters()))
         self._terminated = False       # fmi3Terminate was called: no more steps
         self._pending_error = None     # a refused call, reported by the next doStep
         self._param_names = tuple(f.name for f in fields(BearingParameters))
@@ -198,8 +186,10 @@ class BallBearing3(Fmi3Slave, BearingStepping):
                 self._register(Float64Variable, name, start, desc, unit=unit, causality=output,
                                variability=cont, initial=calculated)
                 units.add(unit)
-        # bearing life (docs/bearing-life.md), as in the FMI 2.0 FMU: ratings, then accumulated outputs
+        # Bearing life (fmu_bearing.life): the ratings are set at initialisation; the life outputs are read from
+        # the accumulator (an empty one before initialisation), and the FMU state restores the accumulator itself.
         me = weakref.proxy(self)   # the accessors must not keep the slave alive (release_on_free)
+        self._empty_life = life.LifeAccumulator(life.LoadRatings.of_bearing(defaults))
         for name, unit, desc, field in life.RATING_OUTPUTS:
             self._register(Float64Variable, name, float(getattr(self._empty_life.ratings, field)), desc, unit=unit,
                            causality=output, variability=discrete, initial=calculated)
@@ -207,7 +197,7 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         for name, unit, desc, prop in life.LIFE_OUTPUTS:
             self.register_variable(Float64Variable(
                 name, description=desc, unit=unit, causality=output, variability=cont, initial=calculated,
-                getter=partial(_life_output, me, prop), setter=_ignore))
+                getter=partial(life_output, me, prop), setter=ignore_value))
             units.add(unit)
         # Parameters: one per BearingParameters field, with its default, unit and description; the FMI type
         # follows the default's Python type (bool -> Boolean, int -> Int32, else Float64); n_balls, which sizes
@@ -282,8 +272,7 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             if not 3 <= self.n_balls <= MAX_BALLS:
                 raise ValueError(f"invalid parameter n_balls = {self.n_balls}: must lie in [3, {MAX_BALLS}]")
             bearing = physics.BallBearing(self.parameters())  # validates, names the parameter
-            accumulator = life.LifeAccumulator(life.LoadRatings.of_bearing(bearing.params),
-                                               bearing.params.reliability_factor)
+            accumulator = self._new_life(bearing.params)
             bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer)
             message = self._evaluate(float(bearing.params.cage_angle_start), bearing)
             if message is not None:
@@ -294,21 +283,12 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             hold_before_raise(self)  # pythonfmu3 over-releases objects on the exception path
             raise  # -> fmi3ExitInitializationMode returns fmi3Fatal (pythonfmu3 has no route to fmi3Error)
         self._bearing, self._life = bearing, accumulator
-        self._publish_ratings()
+        self._publish_ratings(accumulator.ratings)
         self._set = {vr: v.setter for vr, v in self.vars.items() if v.causality == Fmi3Causality.input}
 
-    def _publish_ratings(self):
-        """Copy the accumulator's load ratings to their output variables."""
-        for name, _, _, field in life.RATING_OUTPUTS:
-            setattr(self, name, float(getattr(self._life.ratings, field)))
-
     def do_step(self, current_time, step_size):
-        reason = self._advance(step_size)  # BearingStepping: check inputs, advance the cage, evaluate
-        if reason is None:
-            try:  # the loads at the end of the step, held over it (docs/bearing-life.md)
-                self._life.add(self._loads, self.omega_inner, self.omega_outer, step_size)
-            except Exception as err:  # never let an exception reach pythonfmu3's C++ side
-                reason = f"life accumulation failed: {err!r}"
+        # BearingStepping: check inputs, advance the cage, evaluate, add the end-of-step loads to the life
+        reason = self._advance(step_size)
         if reason is not None:
             self._error(f"doStep at t = {current_time!r} s refused: {reason}")
             return Fmi3StepResult(status=Fmi3Status.discard)  # the outputs keep the values of the last good step
@@ -396,12 +376,11 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         self._pending_error = self._pending_error or msg
         return value
 
-    # --- FMU state: every variable plus whether the instance is initialised ---------------------
+    # --- FMU state: every variable, whether the instance is initialised, the life accumulator's sums ----
     def _get_fmu_state(self):
         state = {v.name: v.getter() for v in self.vars.values()}
         state[_INITIALISED] = self._bearing is not None
-        if self._life is not None:
-            state[_LIFE_STATE] = self._life.state()
+        state.update(self._life_state())
         return state
 
     @staticmethod
@@ -412,7 +391,7 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             return {_INVALID_STATE: f"fmi3DeserializeFMUState: not a serialized BallBearing3 state ({err!r})"}
 
     def _set_fmu_state(self, state):
-        """Check the whole state (names, types, parameters, array size) before assigning any of it."""
+        """Check the whole state (names, types, parameters, array size, life sums) before assigning any of it."""
         try:
             message = state.get(_INVALID_STATE) if isinstance(state, dict) else "not a BallBearing3 state"
             if message is None:
@@ -424,13 +403,12 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             self._pending_error = self._pending_error or message
             return
         for name, value in values.items():
-            if name != "ball_loads" and name not in _LIFE_OUTPUT_NAMES:
+            if name != "ball_loads" and name not in _LIFE_NAMES:   # life outputs: from the accumulator
                 setattr(self, name, value)
         self._set_loads(values["ball_loads"])
-        self._bearing = bearing
+        self._bearing, self._life = bearing, accumulator
         if accumulator is not None:
-            self._life = accumulator
-            self._publish_ratings()
+            self._publish_ratings(accumulator.ratings)
         self._set = {vr: v.setter for vr, v in self.vars.items()
                      if v.causality == Fmi3Causality.input or bearing is None and v.causality in
                      (Fmi3Causality.parameter, Fmi3Causality.structuralParameter)}
@@ -447,17 +425,15 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             else:
                 values[v.name] = convert[self._kind[vr]](state[v.name])
         params = BearingParameters(**{name: values[name] for name in self._param_names})
-        bearing = None
+        bearing = accumulator = None
         if state[_INITIALISED]:
             bearing = (self._bearing if self._bearing is not None and self._bearing.params == params
                        else physics.BallBearing(params))
+            accumulator = self._restored_life(params, state.get(LIFE_STATE))
         if len(values["ball_loads"]) != params.n_balls:
             raise ValueError(f"{len(values['ball_loads'])} ball loads for n_balls = {params.n_balls}")
-        accumulator = None
-        if bearing is not None:   # an initialised state carries the life accumulator's sums
-            accumulator = life.LifeAccumulator(life.LoadRatings.of_bearing(params), params.reliability_factor)
-            accumulator.restore(state[_LIFE_STATE])
         return values, bearing, accumulator
 
 
+_LIFE_NAMES = frozenset(name for name, _, _, _ in life.LIFE_OUTPUTS) if _IMPORT_ERROR is None else frozenset()
 _TYPES = {"Float64": Float64, "Int32": Int32, "UInt64": UInt64, "Boolean": Boolean}

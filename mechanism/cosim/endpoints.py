@@ -169,7 +169,7 @@ class _FmuBase:
         names = [n for n in life.LIFE_NAMES if n in self.variables]
         if not names or not self._instantiated:
             return None
-        get = getattr(self.fmu, "getFloat64", None) or self.fmu.getReal   # FMI 3.0 or 2.0
+        get = getattr(self.fmu, "getReal", None) or self.fmu.getFloat64
         try:
             return dict(zip(names, get([self.variables[n].valueReference for n in names])))
         except Exception:
@@ -337,8 +337,9 @@ class Fmu3Endpoint(_FmuBase):
         """[(getter suffix, vr array, value buffer, column names)] per type, in the order Float64, Int32,
         UInt64, Boolean (the FMI 2.0 endpoint's order: Reals, then Integers, then Booleans)."""
         plan = []
+        # life outputs are run-level figures, read once at the end (life_outputs), not sampled (as FmuEndpoint)
         outputs = [v for v in self.md.modelVariables if v.causality == "output" and v.name not in self.coupling_names
-                   and v.name not in life.LIFE_NAMES]   # life: read once at the end (life_outputs)
+                   and v.name not in life.LIFE_NAMES]
         for type_name, (ctype, suffix) in _SAMPLE_TYPES.items():
             names, vrs, count = [], [], 0
             for v in outputs:
