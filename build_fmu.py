@@ -61,7 +61,7 @@ class FmuSpec(NamedTuple):
 REGISTRY: list[FmuSpec] = [
     FmuSpec(SLAVES / "ball_bearing_fmu.py", "BallBearing", dict(STATE_OPTIONS)),
     FmuSpec(SLAVES / "journal_clearance_fmu.py", "JournalClearance", dict(STATE_OPTIONS)),
-    FmuSpec(ROOT / "mechanism" / "slaves" / "slider_crank_fmu.py", "SliderCrank", dict(STATE_OPTIONS),
+    FmuSpec(ROOT / "mechanism" / "ssp" / "slaves" / "slider_crank_fmu.py", "SliderCrank", dict(STATE_OPTIONS),
             ("fmu_bearing", "mechanism"), ROOT / "docs" / "ssp.md"),
 ]
 
@@ -107,7 +107,8 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
                                 ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo", "*.fmu"))
                 project_files.append(stage / package)
             options_file = stage / BUILD_OPTIONS_FILE
-            options_file.write_text(json.dumps({"max_balls": int(max_balls)}) + "\n", encoding="utf-8")
+            options_file.write_text(json.dumps({"max_balls": int(max_balls), "sources_sha256": source_digest(spec)})
+                                    + "\n", encoding="utf-8")
             doc_dir = None
             if spec.doc.is_file():
                 doc_dir = stage / "documentation"
@@ -173,7 +174,8 @@ def seal(fmu: Path, max_balls: int) -> dict[str, str]:
     packages = sorted({n.split("/")[1] for n in files if n.startswith("resources/") and n.count("/") >= 2})
     renames = {package: f"_{package}_{tag}" for package in packages}
     renames[slave] = f"{slave}_{tag}"
-    options = {"max_balls": int(max_balls), "private_modules": sorted(renames.values())}
+    options = json.loads(files[f"resources/{BUILD_OPTIONS_FILE}"])
+    options.update(max_balls=int(max_balls), private_modules=sorted(renames.values()))
     tmp = fmu.with_name(fmu.name + ".sealing")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as out:
         for info, data in entries:
@@ -209,22 +211,31 @@ def _sources(spec: FmuSpec) -> list[Path]:
     return files
 
 
+def source_digest(spec: FmuSpec) -> str:
+    """SHA-256 over the relative paths and contents of the files ``spec`` is built from (hex).
+
+    Content, not modification times: a moved or checked-out file keeps or gets any mtime."""
+    h = hashlib.sha256()
+    for src in sorted(_sources(spec)):
+        if src.is_file():
+            rel = src.resolve().relative_to(ROOT) if src.resolve().is_relative_to(ROOT) else src.name
+            h.update(str(rel).encode() + b"\0" + src.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
 def is_fresh(fmu: str | Path, spec: FmuSpec | str, max_balls: int = DEFAULT_MAX_BALLS) -> bool:
-    """``fmu`` exists, is newer than every file it is built from, and was built with ``max_balls``."""
+    """``fmu`` exists and was built from the current sources (``source_digest``) with ``max_balls``."""
     fmu = Path(fmu)
     if isinstance(spec, str):
         spec = next(s for s in REGISTRY if s.name == spec)
     if not fmu.is_file():
-        return False
-    mtime = fmu.stat().st_mtime
-    if any(src.stat().st_mtime >= mtime for src in _sources(spec) if src.is_file()):
         return False
     try:
         with zipfile.ZipFile(fmu) as z:
             options = json.loads(z.read(f"resources/{BUILD_OPTIONS_FILE}"))
     except (KeyError, ValueError, zipfile.BadZipFile):
         return False
-    return options.get("max_balls") == max_balls
+    return options.get("max_balls") == max_balls and options.get("sources_sha256") == source_digest(spec)
 
 
 def _model_name(fmu: Path) -> str:
