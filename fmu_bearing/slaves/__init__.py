@@ -13,8 +13,7 @@ standard library is imported here):
   ``exit_initialization_mode``). When an exception reaches pythonfmu's C++ side, it releases its references
   to the slave class, the slave instance and its log queue once in its error handler and once more in the
   instance's destructor; after a few such exceptions in one process those objects are freed while still in
-  use and the host crashes. Parking one extra reference to each balances that (at worst, if pythonfmu is
-  fixed, a small leak per failure). Better still, never let an exception escape where a status can be
+  use and the host crashes. Parking extra references balances that (a small leak per failure). Better still, never let an exception escape where a status can be
   returned instead (``do_step`` returning False gives fmi2Discard).
 * ``guard_pythonfmu_exit(resources)``: call it from the slave's ``__init__``. At process exit the binary's
   C++ static destructors delete its Python-state object and then the library destructor,
