@@ -174,8 +174,8 @@ def seal(fmu: Path, max_balls: int) -> dict[str, str]:
     packages = sorted({n.split("/")[1] for n in files if n.startswith("resources/") and n.count("/") >= 2})
     renames = {package: f"_{package}_{tag}" for package in packages}
     renames[slave] = f"{slave}_{tag}"
-    options = json.loads(files[f"resources/{BUILD_OPTIONS_FILE}"])
-    options.update(max_balls=int(max_balls), private_modules=sorted(renames.values()))
+    options = {**json.loads(files[f"resources/{BUILD_OPTIONS_FILE}"]), "max_balls": int(max_balls),
+               "private_modules": sorted(renames.values())}
     tmp = fmu.with_name(fmu.name + ".sealing")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as out:
         for info, data in entries:

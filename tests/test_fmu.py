@@ -504,13 +504,13 @@ def test_fmu_packs_the_package_and_build_options(fmu):
         names = set(z.namelist())
         options = json.loads(z.read("resources/build_options.json"))
         slave = z.read("resources/slavemodule.txt").decode()
-    import build_fmu
     # sealed (build_fmu.seal): packages and slave module under private names unique to the build
     tag = slave.rsplit("_", 1)[1]
     assert len(tag) == 12 and slave == f"ball_bearing_fmu_{tag}"
-    assert options == {"max_balls": 20, "private_modules": [f"_fmu_bearing_{tag}", f"_pythonfmu_{tag}", slave],
-                       "sources_sha256": build_fmu.source_digest(next(s for s in build_fmu.REGISTRY
-                                                                     if s.name == "BallBearing"))}
+    import build_fmu
+    spec = next(s for s in build_fmu.REGISTRY if s.name == "BallBearing")
+    assert options == {"max_balls": 20, "sources_sha256": build_fmu.source_digest(spec),
+                       "private_modules": [f"_fmu_bearing_{tag}", f"_pythonfmu_{tag}", slave]}
     for required in (f"resources/{slave}.py", f"resources/_fmu_bearing_{tag}/__init__.py",
                      f"resources/_fmu_bearing_{tag}/ball_bearing.py", f"resources/_fmu_bearing_{tag}/hertz.py",
                      f"resources/_fmu_bearing_{tag}/parameters.py", f"resources/_pythonfmu_{tag}/fmi2slave.py",
