@@ -39,6 +39,8 @@ except ImportError:  # running from a source tree that is not installed
     sys.path.insert(0, str(ROOT))
     import fmu_bearing
 
+from fmu_bearing.native.build import SOURCE as LOADER_SOURCE, build_loader  # noqa: E402
+
 PACKAGE = Path(fmu_bearing.__file__).resolve().parent
 SLAVES = PACKAGE / "slaves"
 DOC = ROOT / "docs" / "fmu-interface.md"
@@ -104,7 +106,7 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
             project_files = []
             for package in spec.packages:
                 shutil.copytree(package_dir(package), stage / package,
-                                ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo", "*.fmu"))
+                                ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo", "*.fmu", "native"))
                 project_files.append(stage / package)
             options_file = stage / BUILD_OPTIONS_FILE
             options_file.write_text(json.dumps({"max_balls": int(max_balls), "sources_sha256": source_digest(spec)})
@@ -122,6 +124,7 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
             finally:
                 sys.path[:] = saved_path  # pythonfmu leaves the script's folder on sys.path
             seal(fmu, max_balls)
+            build_loader(fmu)  # native hosts: the loader becomes the FMU's binary (fmu_bearing/native)
             model_name = _model_name(fmu)
             if model_name != spec.name:
                 raise RuntimeError(f"{spec.script} defines model {model_name!r}, expected {spec.name!r}")
@@ -205,7 +208,7 @@ def seal(fmu: Path, max_balls: int) -> dict[str, str]:
 
 def _sources(spec: FmuSpec) -> list[Path]:
     """Files an FMU is built from: its packages (incl. the slave scripts), its script, this build script."""
-    files = [spec.script, Path(__file__)]
+    files = [spec.script, Path(__file__), LOADER_SOURCE]
     for package in spec.packages:
         files += package_dir(package).rglob("*.py")
     return files

@@ -23,6 +23,7 @@ from typing import Mapping, Sequence
 from fmu_bearing.ball_bearing import BallBearing, BearingInputError
 from fmu_bearing.interface import COUPLING_OUTPUT_NAMES, JOINT_INPUT_NAMES
 from fmu_bearing.parameters import BearingParameters, from_values
+from mechanism.cosim.fmpy_logging import fmpy_callbacks, release
 
 INPUTS = JOINT_INPUT_NAMES
 COUPLING_OUTPUTS = COUPLING_OUTPUT_NAMES
@@ -102,15 +103,7 @@ class FmuEndpoint:
     def __init__(self, fmu_path: str | Path, start_values: Mapping[str, float] | None = None,
                  instance_name: str = "bearing", logging_on: bool = False):
         from fmpy import extract, read_model_description
-        from fmpy.fmi2 import (
-            FMU2Slave,
-            calloc,
-            fmi2CallbackAllocateMemoryTYPE,
-            fmi2CallbackFreeMemoryTYPE,
-            fmi2CallbackFunctions,
-            fmi2CallbackLoggerTYPE,
-            free,
-        )
+        from fmpy.fmi2 import FMU2Slave
 
         self.path = Path(fmu_path)
         if not self.path.is_file():
@@ -131,15 +124,7 @@ class FmuEndpoint:
             self.messages.append(f"[{['OK', 'WARNING', 'DISCARD', 'ERROR', 'FATAL', 'PENDING'][status]}] "
                                  f"{message.decode('utf-8', 'replace')}")
 
-        self._callbacks = fmi2CallbackFunctions()
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(_log)
-        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        try:
-            from fmpy.logging import addLoggerProxy
-            addLoggerProxy(ctypes.byref(self._callbacks))
-        except Exception:  # pragma: no cover - the proxy only formats variadic messages
-            pass
+        self._callbacks = fmpy_callbacks(_log)
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzipdir,
                              modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=instance_name)
         self._instantiated = False
@@ -257,6 +242,7 @@ class FmuEndpoint:
             except Exception:
                 pass
             self._instantiated = False
+        release(self._callbacks)
         shutil.rmtree(self._unzipdir, ignore_errors=True)
 
     def __enter__(self):
