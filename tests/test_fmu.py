@@ -380,7 +380,7 @@ def test_eccentricity_beyond_the_limit_is_an_error(fmu, params, e_x):
 
 
 INVALID = [("n_balls", 2), ("n_balls", 21), ("poisson_ratio", 0.7), ("youngs_modulus", -1e9),
-           ("radial_clearance", -1e-6), ("inner_groove_conformity", 0.5), ("damping_coefficient", -5.0),
+           ("radial_clearance", -1e-4), ("reliability_factor", 2.0), ("inner_groove_conformity", 0.5), ("damping_coefficient", -5.0),
            ("inner_race_diameter", 0.03), ("n_balls", 14)]
 
 

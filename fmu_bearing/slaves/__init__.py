@@ -67,6 +67,8 @@ UNIT_DEFINITIONS = {
     "Pa": {"kg": 1, "m": -1, "s": -2},
     "Pa.s": {"kg": 1, "m": -1, "s": -1},
     "1/Pa": {"kg": -1, "m": 1, "s": 2},
+    "h": {"s": 1, "factor": 3600.0},
+    "Mrev": {"rad": 1, "factor": 2.0e6 * math.pi},   # millions of revolutions (bearing life)
     "N/m1.5": None,                      # FMI exponents are integers: declared by name only
 }
 
