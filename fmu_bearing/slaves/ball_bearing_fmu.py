@@ -107,8 +107,12 @@ class BallBearing(Fmi2Slave, BearingStepping):
         # errors reach the host even with logging off
         self._host_log = HostLogger(kwargs.get("logger"), self.instance_name, kwargs.get("resources"))
         guard_pythonfmu_exit(self.resources)
-        release_on_free(self)                      # the last fmi2FreeInstance undoes the FMU's imports
-        self.capacity = read_capacity(self.resources)
+        try:
+            release_on_free(self)                  # the last fmi2FreeInstance undoes the FMU's imports
+            self.capacity = read_capacity(self.resources)
+        except Exception as err:                   # fmi2Instantiate returns NULL: say why, also with logging off
+            self._host_log(3, f"instantiation failed: {err!r}")
+            raise
         self._bearing = None                       # physics.BallBearing, built at exit of initialisation
         self._life = None                          # life.LifeAccumulator, built at exit of initialisation
         self._pending_error = None                 # a refused call, reported by the next doStep
