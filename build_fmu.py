@@ -2,15 +2,28 @@
 
 Each FMU in ``REGISTRY`` is built from its slave script with the packages it needs (``fmu_bearing``,
 and for the SliderCrank FMU also ``mechanism``) packed into the FMU's resources, so the FMU runs in
-any Python host that has numpy and scipy, without this project installed. Build options (the per-ball output capacity) are written to
-``resources/build_options.json`` inside the FMU, where the slave reads them at instantiation.
+any Python host without this project installed: BallBearing and JournalClearance need nothing beyond
+the standard library, SliderCrank (``mechanism``) needs numpy and scipy. Build options (the per-ball
+output capacity) are written to ``resources/build_options.json`` inside the FMU, where the slave reads
+them at instantiation.
+
+Sealing (``seal``): after pythonfmu has built the archive, every Python package in its resources (ours
+and pythonfmu's own copy) and the slave module are renamed to private names unique to the build
+(``_fmu_bearing_<hash>``, ``ball_bearing_fmu_<hash>``, ...; the hash is taken over the packed files),
+their absolute imports rewritten, and the names listed in ``build_options.json`` (``private_modules``).
+So the FMU runs its own copy of the physics even in a host that has imported another ``fmu_bearing``,
+two builds of one FMU never share modules, and the slave can remove exactly its own modules from
+``sys.modules`` when its last instance is freed (``fmu_bearing.slaves.release_on_free``).
 """
 from __future__ import annotations
 
 import argparse
+import ast
+import hashlib
 import importlib.util
 import json
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -50,7 +63,7 @@ class FmuSpec(NamedTuple):
 REGISTRY: list[FmuSpec] = [
     FmuSpec(SLAVES / "ball_bearing_fmu.py", "BallBearing", dict(STATE_OPTIONS)),
     FmuSpec(SLAVES / "journal_clearance_fmu.py", "JournalClearance", dict(STATE_OPTIONS)),
-    FmuSpec(ROOT / "mechanism" / "slaves" / "slider_crank_fmu.py", "SliderCrank", dict(STATE_OPTIONS),
+    FmuSpec(ROOT / "mechanism" / "ssp" / "slaves" / "slider_crank_fmu.py", "SliderCrank", dict(STATE_OPTIONS),
             ("fmu_bearing", "mechanism"), ROOT / "docs" / "ssp.md"),
 ]
 
@@ -96,7 +109,8 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
                                 ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo", "*.fmu", "native"))
                 project_files.append(stage / package)
             options_file = stage / BUILD_OPTIONS_FILE
-            options_file.write_text(json.dumps({"max_balls": int(max_balls)}) + "\n", encoding="utf-8")
+            options_file.write_text(json.dumps({"max_balls": int(max_balls), "sources_sha256": source_digest(spec)})
+                                    + "\n", encoding="utf-8")
             doc_dir = None
             if spec.doc.is_file():
                 doc_dir = stage / "documentation"
@@ -109,6 +123,7 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
                                            documentation_folder=doc_dir, **spec.options)
             finally:
                 sys.path[:] = saved_path  # pythonfmu leaves the script's folder on sys.path
+            seal(fmu, max_balls)
             build_loader(fmu)  # native hosts: the loader becomes the FMU's binary (fmu_bearing/native)
             model_name = _model_name(fmu)
             if model_name != spec.name:
@@ -124,6 +139,73 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
     return built
 
 
+def _rewrite_imports(source: str, renames: dict[str, str]) -> str:
+    """``source`` with every absolute import of a package in ``renames`` (old -> new name) renamed."""
+    names = "|".join(map(re.escape, renames))
+    pattern = re.compile(rf"^(\s*(?:from|import)\s+)({names})(?=[\s.,;]|$)", re.M)
+    return pattern.sub(lambda m: m.group(1) + renames[m.group(2)], source)
+
+
+def _unsealed_imports(source: str, renames: dict[str, str]) -> list[str]:
+    """Absolute imports of a renamed package that survived the rewrite (an import form the pattern missed)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [a.name for a in node.names if a.name.split(".")[0] in renames]
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module.split(".")[0] in renames:
+            found.append(node.module)
+    return found
+
+
+def seal(fmu: Path, max_balls: int) -> dict[str, str]:
+    """Rename the packages and the slave module packed in ``fmu`` to private names unique to the build.
+
+    Rewrites the archive in place: ``resources/<package>/`` -> ``resources/_<package>_<hash>/`` for every
+    package folder (ours and pythonfmu's), ``resources/<slave>.py`` -> ``resources/<slave>_<hash>.py``
+    (and ``slavemodule.txt``), absolute imports of those names in every packed ``.py`` file, and the build
+    options with the list of private module names. The hash (12 hex digits of SHA-256) is taken over the
+    packed files, so the same sources give the same names. Returns {old name: private name}.
+    """
+    with zipfile.ZipFile(fmu) as z:
+        entries = [(info, z.read(info)) for info in z.infolist()]
+    files = {info.filename: data for info, data in entries}
+    slave = files["resources/slavemodule.txt"].decode("utf-8").strip()
+    digest = hashlib.sha256()
+    for name in sorted(n for n in files if n.startswith("resources/")):
+        digest.update(name.encode() + b"\0" + files[name] + b"\0")
+    tag = digest.hexdigest()[:12]
+    packages = sorted({n.split("/")[1] for n in files if n.startswith("resources/") and n.count("/") >= 2})
+    renames = {package: f"_{package}_{tag}" for package in packages}
+    renames[slave] = f"{slave}_{tag}"
+    options = {**json.loads(files[f"resources/{BUILD_OPTIONS_FILE}"]), "max_balls": int(max_balls),
+               "private_modules": sorted(renames.values())}
+    tmp = fmu.with_name(fmu.name + ".sealing")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as out:
+        for info, data in entries:
+            name = info.filename
+            if name.startswith("resources/"):
+                parts = name.split("/")
+                if len(parts) > 2 and parts[1] in renames:
+                    parts[1] = renames[parts[1]]
+                elif name == f"resources/{slave}.py":
+                    parts[1] = f"{renames[slave]}.py"
+                elif name == "resources/slavemodule.txt":
+                    data = renames[slave].encode("utf-8")
+                elif name == f"resources/{BUILD_OPTIONS_FILE}":
+                    data = (json.dumps(options) + "\n").encode("utf-8")
+                name = "/".join(parts)
+                if name.endswith(".py"):
+                    text = _rewrite_imports(data.decode("utf-8"), renames)
+                    left = _unsealed_imports(text, renames)
+                    if left:
+                        raise RuntimeError(f"{name}: imports {left} could not be sealed (rewrite them as "
+                                           f"'import x' / 'from x import y' statements)")
+                    data = text.encode("utf-8")
+            out.writestr(zipfile.ZipInfo(name, date_time=info.date_time), data, zipfile.ZIP_DEFLATED)
+    os.replace(tmp, fmu)
+    return renames
+
+
 def _sources(spec: FmuSpec) -> list[Path]:
     """Files an FMU is built from: its packages (incl. the slave scripts), its script, this build script."""
     files = [spec.script, Path(__file__), LOADER_SOURCE]
@@ -132,22 +214,31 @@ def _sources(spec: FmuSpec) -> list[Path]:
     return files
 
 
+def source_digest(spec: FmuSpec) -> str:
+    """SHA-256 over the relative paths and contents of the files ``spec`` is built from (hex).
+
+    Content, not modification times: a moved or checked-out file keeps or gets any mtime."""
+    h = hashlib.sha256()
+    for src in sorted(_sources(spec)):
+        if src.is_file():
+            rel = src.resolve().relative_to(ROOT) if src.resolve().is_relative_to(ROOT) else src.name
+            h.update(str(rel).encode() + b"\0" + src.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
 def is_fresh(fmu: str | Path, spec: FmuSpec | str, max_balls: int = DEFAULT_MAX_BALLS) -> bool:
-    """``fmu`` exists, is newer than every file it is built from, and was built with ``max_balls``."""
+    """``fmu`` exists and was built from the current sources (``source_digest``) with ``max_balls``."""
     fmu = Path(fmu)
     if isinstance(spec, str):
         spec = next(s for s in REGISTRY if s.name == spec)
     if not fmu.is_file():
-        return False
-    mtime = fmu.stat().st_mtime
-    if any(src.stat().st_mtime >= mtime for src in _sources(spec) if src.is_file()):
         return False
     try:
         with zipfile.ZipFile(fmu) as z:
             options = json.loads(z.read(f"resources/{BUILD_OPTIONS_FILE}"))
     except (KeyError, ValueError, zipfile.BadZipFile):
         return False
-    return options.get("max_balls") == max_balls
+    return options.get("max_balls") == max_balls and options.get("sources_sha256") == source_digest(spec)
 
 
 def _model_name(fmu: Path) -> str:

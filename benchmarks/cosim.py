@@ -13,7 +13,7 @@ import argparse
 import time
 
 from mechanism import run as run_module
-from mechanism.exchange import FmuEndpoint, InProcessEndpoint
+from mechanism.cosim.endpoints import FmuEndpoint, InProcessEndpoint
 from mechanism.run import RunConfig, run
 
 

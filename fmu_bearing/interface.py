@@ -2,7 +2,7 @@
 
 A contract between the components and their masters: the BallBearing and JournalClearance
 slaves declare these inputs and coupling outputs, the SliderCrank FMU declares them the other
-way round, and the Python master (``mechanism.exchange``) exchanges them each step.
+way round, and the Python master (``mechanism.cosim.endpoints``) exchanges them each step.
 Each entry is (name, unit, description).
 """
 from __future__ import annotations

@@ -132,3 +132,36 @@ def validate(p: BearingParameters, capacity: int | None = None) -> None:
     if p.effective_eccentricity_limit <= p.radial_clearance / 2:
         raise BearingParameterError("eccentricity_limit", p.eccentricity_limit,
                                     "must exceed half the radial clearance")
+
+
+def from_values(values) -> BearingParameters:
+    """BearingParameters from user input, name -> value: the one place where user input
+    (``--set NAME=VALUE``, ``.ssv`` parameter sets, study options) becomes parameters.
+
+    Each value is converted to its field's type; an unknown name, an integer field given a
+    non-integer (``n_balls = 7.9``) or a Boolean field given anything but a Boolean or 0/1 is an
+    error naming the parameter. Ranges are checked by ``validate``.
+    """
+    kinds = {f.name: type(f.default) for f in fields(BearingParameters)}
+    unknown = sorted(set(values) - set(kinds))
+    if unknown:
+        raise BearingParameterError(unknown[0], values[unknown[0]],
+                                    f"not a BallBearing parameter (known: {', '.join(kinds)})")
+    return BearingParameters(**{k: _convert(k, kinds[k], v) for k, v in values.items()})
+
+
+def _convert(name: str, kind: type, value):
+    """``value`` as ``kind`` (int, float or bool), refusing a conversion that would change it."""
+    if kind is bool:
+        if isinstance(value, bool) or value in (0, 1):
+            return bool(value)
+        raise BearingParameterError(name, value, "must be true or false")
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise BearingParameterError(name, value, "must be a number") from None
+    if kind is int:
+        if not number.is_integer():
+            raise BearingParameterError(name, value, "must be an integer")
+        return int(number)
+    return number

@@ -6,29 +6,13 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .bearing_joint import CONTACT_POINTS
-from .coupling import DEFAULT_SCHEME, SCHEMES
-from .monolithic import METHODS
+from mechanism.cosim.coupling import DEFAULT_SCHEME, SCHEMES
+from mechanism.cosim.joint import CONTACT_POINTS
+from mechanism.cosim.monolithic import METHODS
+from mechanism.run import parse_setting
 
 if TYPE_CHECKING:
-    from .run import RunConfig
-
-
-def parse_setting(text: str) -> tuple[str, object]:
-    """NAME=VALUE -> (name, int | float | bool); the component converts to its variable's type."""
-    if "=" not in text:
-        raise argparse.ArgumentTypeError(f"--set expects NAME=VALUE, got {text!r}")
-    name, raw = (s.strip() for s in text.split("=", 1))
-    low = raw.lower()
-    if low in ("true", "false"):
-        return name, low == "true"
-    try:
-        return name, int(raw)
-    except ValueError:
-        try:
-            return name, float(raw)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"--set {name}: {raw!r} is not a number") from None
+    from mechanism.run import RunConfig
 
 
 def add_run_arguments(p: argparse.ArgumentParser) -> None:
@@ -56,7 +40,7 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args) -> "RunConfig":
-    from .run import RunConfig
+    from mechanism.run import RunConfig
     return RunConfig(rpm=args.rpm, revs=args.revs, balls=args.balls, joint=args.joint, mode=args.mode,
                      step=args.step, output_interval=args.output_interval, settings=dict(args.settings),
                      scheme=args.scheme, contact_points=args.contact_points, gravity=args.gravity,
@@ -65,8 +49,10 @@ def config_from_args(args) -> "RunConfig":
 
 def cmd_run(args) -> int:
     from dataclasses import replace
-    from .run import run, write_outputs
-    from .ssp_run import config_from_ssp_args
+
+    from mechanism.output.results import write_outputs
+    from mechanism.run import run
+    from mechanism.ssp.config import config_from_ssp_args
     config = config_from_ssp_args(args) if args.ssp else config_from_args(args)
     result = run(config)
     ideal = None
@@ -87,7 +73,7 @@ def cmd_run(args) -> int:
 
 
 #: modules that add a subcommand: each defines ``register(subparsers)`` (add_parser + set_defaults(func=...))
-SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.ssp_run")
+SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.ssp.cli")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -96,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="simulate the paper's slider-crank once and write CSV, JSON and PNG")
     add_run_arguments(p)
-    from .ssp_run import add_ssp_arguments
+    from mechanism.ssp.config import add_ssp_arguments
     add_ssp_arguments(p)
     p.add_argument("--out", default="results/run", help="output folder (default results/run)")
     p.add_argument("--no-ideal", action="store_true", help="do not run the ideal-joint counterpart")

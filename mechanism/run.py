@@ -1,26 +1,31 @@
-"""One run of the paper's slider-crank: which joint, which mode, which component; writes the result files.
+"""The one driver: a run's configuration -> the system -> the master (or the monolithic reference) -> a RunResult.
 
-``RunConfig`` is what the command line ``python -m mechanism run`` fills in; ``run`` builds the
-model (``slider_crank``), the generic system (``solver``), the bearing link and component,
-and hands them to the master (``master``) or to the monolithic reference (``monolithic``).
+``RunConfig`` is what the command line ``python -m mechanism run`` (and ``--ssp``, and every study)
+fills in; ``run`` builds the paper's slider-crank (``mechanism.systems.slider_crank``) on the generic
+multibody core (``mechanism.multibody``), the bearing link and component (``mechanism.cosim``), and
+hands them to the fixed-step master, the adaptive master (``run_adaptive``) or the monolithic
+reference. Writing files is ``mechanism.output``'s job.
 """
 from __future__ import annotations
 
-import json
+import argparse
+import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from fmu_bearing.ball_bearing import BallBearing
-from .bearing_joint import BearingLink
-from .coupling import DEFAULT_SCHEME
-from .exchange import FmuEndpoint, InProcessEndpoint, bearing_parameters
-from .master import MasterSettings, run_master
-from .monolithic import run_monolithic
-from .results import RunResult, summary, write_csv
-from .slider_crank import SliderCrankParameters, build, initial_state
-from .solver import System
+from fmu_bearing.parameters import from_values as bearing_parameters
+from mechanism.cosim.adaptive import AdaptiveSettings
+from mechanism.cosim.adaptive import run_adaptive as run_adaptive_master
+from mechanism.cosim.coupling import DEFAULT_SCHEME
+from mechanism.cosim.endpoints import FmuEndpoint, InProcessEndpoint
+from mechanism.cosim.joint import BearingLink
+from mechanism.cosim.master import MasterSettings, run_master
+from mechanism.cosim.monolithic import run_monolithic
+from mechanism.cosim.record import RunResult
+from mechanism.multibody.solver import System
+from mechanism.systems.slider_crank import (SliderCrankParameters, build, ideal_reaction, initial_state,
+                                            slider_crank_observer)
 
 JOINTS = ("bearing", "ideal", "clearance")
 MODES = ("cosim", "inprocess", "monolithic")
@@ -68,6 +73,23 @@ class RunConfig:
         return values
 
 
+def parse_setting(text: str) -> tuple[str, object]:
+    """NAME=VALUE -> (name, int | float | bool); the component converts to its variable's type."""
+    if "=" not in text:
+        raise argparse.ArgumentTypeError(f"--set expects NAME=VALUE, got {text!r}")
+    name, raw = (s.strip() for s in text.split("=", 1))
+    low = raw.lower()
+    if low in ("true", "false"):
+        return name, low == "true"
+    try:
+        return name, int(raw)
+    except ValueError:
+        try:
+            return name, float(raw)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"--set {name}: {raw!r} is not a number") from None
+
+
 def fmu_path(config: RunConfig) -> Path:
     """The component FMU for the run: ``--fmu`` as given, else dist/<Name>.fmu, (re)built when it is
     missing or older than its sources (a stale FMU is never used silently)."""
@@ -90,27 +112,6 @@ def clearance_per_side(config: RunConfig) -> float:
         value = config.settings.get("radial_clearance")
         return float(value) if value is not None else ClearanceParameters().radial_clearance
     return 0.0
-
-
-def slider_crank_observer(system: System):
-    """observe(q, qd, qdd, lam, t): crank angle, slider position/velocity/acceleration, crank moment (SI)."""
-    crank, slider = system.slice("crank"), system.slice("slider")
-
-    def observe(q, qd, qdd, lam, t):
-        return {"crank_angle": float(q[crank.start + 2]), "slider_x": float(q[slider.start]),
-                "slider_v": float(qd[slider.start]), "slider_a": float(qdd[slider.start]),
-                "crank_moment": system.driving_moment(lam, "crank_driver")}
-    return observe
-
-
-def ideal_reaction(system: System):
-    """The ideal crank-rod pin's force on the crank (the housing body) from eq. (7), as (F_x, F_y) [N]."""
-    crank = system.slice("crank")
-
-    def reaction(q, lam):
-        Qc = system.reactions(q, lam)["crank_rod"]
-        return float(Qc[crank.start]), float(Qc[crank.start + 1])
-    return reaction
 
 
 def run(config: RunConfig) -> RunResult:
@@ -151,22 +152,34 @@ def run(config: RunConfig) -> RunResult:
         endpoint.close()
 
 
-def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, plots: bool = True) -> dict:
-    """timeseries.csv, summary.json (with the ideal joint's figures if given) and the PNG plots into ``out``."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv(result, out / "timeseries.csv")
-    figures = summary(result)
-    if ideal is not None:
-        write_csv(ideal, out / "ideal_timeseries.csv")
-        figures["ideal"] = summary(ideal)
-        if len(result["time"]) and len(ideal["time"]) >= len(result["time"]):
-            k = len(result["time"])
-            figures["rms_slider_acceleration_deviation_m_s2"] = float(
-                np.sqrt(np.mean((result["slider_a"] - ideal["slider_a"][:k]) ** 2)))
-            figures["max_slider_position_error_m"] = float(np.max(np.abs(result["slider_x"] - ideal["slider_x"][:k])))
-    (out / "summary.json").write_text(json.dumps(figures, indent=2, default=float) + "\n")
-    if plots and len(result["time"]) > 1:
-        from .plots import plot_run
-        plot_run(result, out, ideal)
-    return figures
+def run_adaptive(config, tol: float, initial_step: float | None = None, **settings) -> RunResult:
+    """``run`` with the adaptive communication step (``mechanism.cosim.adaptive``): the slider-crank of ``config`` (a ``RunConfig``, mode
+    cosim or inprocess, joint bearing), with ``tol``; extra keyword arguments go to ``AdaptiveSettings``."""
+    if config.joint != "bearing" or config.mode not in ("cosim", "inprocess"):
+        raise ValueError("the adaptive driver runs the ball-bearing joint in mode cosim or inprocess")
+    params = SliderCrankParameters(rpm=config.rpm, gravity=config.gravity)
+    model = build(params, "bearing")
+    system = System(model)
+    q0, qd0 = initial_state(system, params)
+    observe = slider_crank_observer(system)
+    clearance = clearance_per_side(config)
+    meta = {"config": asdict(config), "crank_period_s": config.crank_period, "clearance_per_side_m": clearance}
+    adaptive = AdaptiveSettings(t_end=config.revs * config.crank_period, output_interval=config.output_interval,
+                                scheme=config.scheme, progress=config.progress, tol=tol,
+                                step=initial_step or min(1e-6, config.output_interval),
+                                e_floor=clearance or 1e-5,
+                                description=f"adaptive {config.mode} {config.rpm:g} rpm", **settings)
+    link = BearingLink(system, model.bearings[0], config.contact_points)
+    if config.mode == "inprocess":
+        endpoint = InProcessEndpoint(bearing_parameters(config.component_settings))
+    else:
+        path = fmu_path(config)
+        endpoint = FmuEndpoint(path, config.component_settings, instance_name=config.joint)
+        meta["fmu"] = str(path)
+    start = time.perf_counter()
+    try:
+        result = run_adaptive_master(system, q0, qd0, adaptive, observe, link, endpoint, meta)
+    finally:
+        endpoint.close()
+    result.meta["wall_time_s"] = time.perf_counter() - start
+    return result

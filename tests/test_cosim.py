@@ -14,9 +14,9 @@ import pytest
 import closed_form
 from fmu_bearing import BallBearing, BearingParameters
 from mechanism.cli import main
-from mechanism.results import read_csv, summary
+from mechanism.output.results import read_csv, summary
 from mechanism.run import RunConfig, run
-from mechanism.slider_crank import SliderCrankParameters
+from mechanism.systems.slider_crank import SliderCrankParameters
 
 SC = SliderCrankParameters()
 

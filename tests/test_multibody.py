@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 import closed_form as cf
-from mechanism.integrators import rk4_step
-from mechanism.model import GROUND, AngleDriver, Body, Model, Point, Revolute, Translational
-from mechanism.slider_crank import SliderCrankParameters, build, initial_state
-from mechanism.solver import System
+from mechanism.multibody.integrators import rk4_step
+from mechanism.multibody.model import GROUND, AngleDriver, Body, Model, Point, Revolute, Translational
+from mechanism.systems.slider_crank import SliderCrankParameters, build, initial_state
+from mechanism.multibody.solver import System
 
 G = 9.81
 PARAMS = SliderCrankParameters()          # Table 1, 1200 rpm

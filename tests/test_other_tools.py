@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mechanism import ssp_run
+from mechanism.ssp import config as ssp_config
+from mechanism.ssp import tools as ssp_tools
 from test_ssp import H, _Pair, slider_crank_fmu, ssp_archive  # noqa: F401  (session fixtures)
 
 T_END = 0.01          # 0.2 revolutions at 1200 rpm
@@ -50,11 +51,11 @@ def _need(tool):
 def results(ssp_archive):
     """Each available tool's run of the default set, and our master's, at h = 1e-5 s to T_END."""
     out = {}
-    for tool in ssp_run.TOOLS:
+    for tool in ssp_tools.TOOLS:
         if _tool_available(tool) is None:
-            out[tool] = ssp_run.simulate_with(tool, ssp_archive, step=H, t_end=T_END)
+            out[tool] = ssp_tools.simulate_with(tool, ssp_archive, step=H, t_end=T_END)
     from mechanism.run import run
-    config, system = ssp_run.config_from_ssp(ssp_archive, revs=T_END * 20.0, progress=False)
+    config, system = ssp_config.config_from_ssp(ssp_archive, revs=T_END * 20.0, progress=False)
     try:
         r = run(config)
     finally:
@@ -70,7 +71,7 @@ def _rel(a, b, key):
     return float(np.max(np.abs(a[key] - b[key])) / np.max(np.abs(b[key])))
 
 
-@pytest.mark.parametrize("tool", ssp_run.TOOLS)
+@pytest.mark.parametrize("tool", ssp_tools.TOOLS)
 def test_tool_runs_the_ssp_at_1e_5_for_0_2_rev(results, tool):
     _need(tool)
     r = results[tool]
@@ -92,7 +93,7 @@ def test_fmpy_ssp_is_the_jacobi_loop_started_from_zero_connectors(results, ssp_a
     """fmpy.ssp starts every connector at 0 (the bearing's first step sees omega = 0 instead of the ring
     speeds): a Jacobi loop started so reproduces it to rounding, and that start alone separates it from
     libcosim/ecos by a few per cent of the peaks after 0.2 rev."""
-    from mechanism import ssp_model as sm
+    from mechanism import ssp as sm
     with sm.load_ssp(ssp_archive) as system:
         pair = _Pair(system.components["mechanism"].fmu, system.components["bearing"].fmu)
         try:
@@ -118,7 +119,7 @@ def test_fmpy_ssp_is_the_jacobi_loop_started_from_zero_connectors(results, ssp_a
         assert _rel(fmpy, other, "mechanism.slider_x") < 1e-5
 
 
-@pytest.mark.parametrize("tool", ssp_run.TOOLS)
+@pytest.mark.parametrize("tool", ssp_tools.TOOLS)
 def test_tools_agree_with_our_master_on_the_same_ssp(results, tool):
     """Jacobi (tools) vs Gauss-Seidel jacobian-drift (our master): the force lags one more step in
     Jacobi, so the contact oscillation is slightly out of phase: the peaks agree to a few per cent,
@@ -138,9 +139,9 @@ def test_named_parameter_set_reaches_the_fmus_in_ecos_and_libcosim(ssp_archive):
     _need("libcosim")
     _need("ecos")
     name = "BB1B420205-15balls-1200rpm"
-    a = ssp_run.simulate_with("ecos", ssp_archive, name, step=H, t_end=0.003)
-    b = ssp_run.simulate_with("libcosim", ssp_archive, name, step=H, t_end=0.003)
-    d = ssp_run.simulate_with("ecos", ssp_archive, None, step=H, t_end=0.003)
+    a = ssp_tools.simulate_with("ecos", ssp_archive, name, step=H, t_end=0.003)
+    b = ssp_tools.simulate_with("libcosim", ssp_archive, name, step=H, t_end=0.003)
+    d = ssp_tools.simulate_with("ecos", ssp_archive, None, step=H, t_end=0.003)
     for key in KEYS:
         assert _rel(a, b, key) < 1e-8, key
     assert _rel(a, d, "bearing.F_x") > 1e-3      # 15 balls, not the default 8

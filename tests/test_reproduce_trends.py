@@ -14,7 +14,7 @@ import pytest
 
 from mechanism.run import RunConfig, run
 from mechanism.studies import reproduce as rp
-from mechanism.studies.reproduce_report import (ball_angles, ball_deflections, ball_loads, eccentricity,
+from mechanism.studies.reproduce.analysis import (ball_angles, ball_deflections, ball_loads, eccentricity,
                                                 rms_deviation, vibration_frequency)
 
 WINDOW = (0.5 * np.pi, np.pi)   # crank-angle window of the trend checks [rad]
@@ -154,8 +154,9 @@ def test_cache_key_covers_config_and_code_but_not_progress():
     assert rp.config_key(cfg, v) != rp.config_key(RunConfig(rpm=600.0, revs=0.1, settings={"n_balls": 9}), v)
     assert rp.config_key(cfg, v) != rp.config_key(cfg, "another code version")
     names = {p.relative_to(rp.ROOT).as_posix() for p in rp.code_files()}
-    assert {"mechanism/run.py", "mechanism/master.py", "fmu_bearing/ball_bearing.py", "build_fmu.py"} <= names
-    assert not any(n.startswith("mechanism/studies/") or n == "mechanism/plots.py" for n in names)
+    assert {"mechanism/run.py", "mechanism/cosim/master.py", "mechanism/multibody/solver.py",
+            "fmu_bearing/ball_bearing.py", "build_fmu.py"} <= names
+    assert not any(n.startswith(("mechanism/studies/", "mechanism/output/")) for n in names)
 
 
 def test_command_writes_figures_and_report(tmp_path):
@@ -175,7 +176,7 @@ def test_command_writes_figures_and_report(tmp_path):
 
 def test_ideal_joint_runs_at_the_larger_step_give_the_same_result():
     """The ideal runs use IDEAL_STEP (no contact); checked against the contact runs' 1e-5 s step."""
-    from mechanism.studies.reproduce_report import on_times
+    from mechanism.studies.reproduce.analysis import on_times
     fine = run(short(1200, revs=0.2, output_interval=1e-5, joint="ideal"))
     coarse = run(short(1200, revs=0.2, step=rp.IDEAL_STEP, output_interval=rp.IDEAL_STEP, joint="ideal"))
     every = int(round(rp.IDEAL_STEP / 1e-5))

@@ -16,9 +16,10 @@ import pytest
 import build_fmu
 from conftest import built_fmu
 from fmu_bearing.parameters import BearingParameters
-from mechanism import ssp_model as sm
-from mechanism import ssp_run
-from mechanism.slider_crank import SliderCrankParameters
+from mechanism import ssp as sm
+from mechanism.ssp import config as ssp_config
+from mechanism.ssp import tools as ssp_tools
+from mechanism.systems.slider_crank import SliderCrankParameters
 
 H = 1e-5
 T_SHORT = 0.002       # s: 200 steps, for the quick checks
@@ -202,9 +203,9 @@ def test_bad_ssp_stops_the_tools_and_the_master_before_any_simulation(ssp_archiv
     import fmpy.ssp.simulation
     monkeypatch.setattr(fmpy.ssp.simulation, "simulate_ssp", lambda *a, **k: pytest.fail("simulation started"))
     with pytest.raises(sm.SspError, match="unit mismatch"):
-        ssp_run.simulate_with("fmpy", bad)
+        ssp_tools.simulate_with("fmpy", bad)
     with pytest.raises(sm.SspError, match="unit mismatch"):
-        ssp_run.config_from_ssp(bad)
+        ssp_config.config_from_ssp(bad)
 
 
 def test_unknown_parameter_set_and_non_archive_are_rejected(ssp_archive, tmp_path):
@@ -229,28 +230,28 @@ def _run_args(*argv):
     from mechanism.cli import add_run_arguments
     parser = argparse.ArgumentParser()
     add_run_arguments(parser)
-    ssp_run.add_ssp_arguments(parser)
+    ssp_config.add_ssp_arguments(parser)
     return parser.parse_args(list(argv))
 
 
 def test_run_ssp_maps_the_parameter_set_onto_run_config(ssp_archive):
     args = _run_args("--ssp", str(ssp_archive), "--parameter-set", "BB1B420205-20balls-1200rpm",
                      "--revs", "0.01", "--quiet")
-    config = ssp_run.config_from_ssp_args(args)
+    config = ssp_config.config_from_ssp_args(args)
     assert config.rpm == 1200.0 and config.joint == "bearing" and config.revs == 0.01
     assert config.settings == BearingParameters(n_balls=20, allow_ball_overlap=True).as_dict()
     assert Path(config.fmu).is_file() and Path(config.fmu).name == "BallBearing.fmu"
-    config600, system = ssp_run.config_from_ssp(ssp_archive, "BB1B420205-600rpm")
+    config600, system = ssp_config.config_from_ssp(ssp_archive, "BB1B420205-600rpm")
     system.close()
     assert config600.rpm == 600.0
     with pytest.raises(ValueError, match="drop --rpm, --set"):
-        ssp_run.config_from_ssp_args(_run_args("--ssp", str(ssp_archive), "--rpm", "600", "--set", "n_balls=9"))
+        ssp_config.config_from_ssp_args(_run_args("--ssp", str(ssp_archive), "--rpm", "600", "--set", "n_balls=9"))
 
 
 def test_run_ssp_refuses_slider_crank_values_run_config_cannot_carry(ssp_archive, tmp_path):
     bad = _edit(ssp_archive, tmp_path, MECH_SSV, edit=_param("crank_length", "Real", 0.05, 0.06))
     with pytest.raises(sm.SspError, match="Parameter 'crank_length'.*RunConfig carries rpm and gravity only"):
-        ssp_run.config_from_ssp(bad)
+        ssp_config.config_from_ssp(bad)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -272,7 +273,9 @@ def test_slider_crank_fmu_is_valid_and_declares_the_interface(slider_crank_fmu):
     assert float(v["crank_mass"].start) == SliderCrankParameters().crank_mass
     with zipfile.ZipFile(slider_crank_fmu) as z:
         names = z.namelist()
-    assert "resources/mechanism/solver.py" in names and "resources/slider_crank_fmu.py" in names
+        slave = z.read("resources/slavemodule.txt").decode()   # sealed: private names (build_fmu.seal)
+    tag = slave.rsplit("_", 1)[1]
+    assert f"resources/_mechanism_{tag}/multibody/solver.py" in names and f"resources/slider_crank_fmu_{tag}.py" in names
 
 
 class _Pair:
@@ -335,7 +338,7 @@ def test_slider_crank_fmu_with_gauss_seidel_ordering_reproduces_our_master(ssp_a
     """force_lag_steps = 0 and a Gauss-Seidel loop: the two-FMU system is our master's jacobian-drift
     co-simulation, to rounding (the same core, the same BallBearing FMU)."""
     from mechanism.run import run
-    config, system = ssp_run.config_from_ssp(ssp_archive, revs=T_SHORT * 20.0, progress=False)  # 0.04 rev = 2 ms
+    config, system = ssp_config.config_from_ssp(ssp_archive, revs=T_SHORT * 20.0, progress=False)  # 0.04 rev = 2 ms
     try:
         ref = run(config)
         pair = _Pair(system.components["mechanism"].fmu, system.components["bearing"].fmu, {"force_lag_steps": 0})
@@ -371,7 +374,7 @@ def test_slider_crank_fmu_state_round_trip(ssp_archive):
 def test_two_fmu_jacobi_is_stable_at_1e_5_with_the_tangent_inputs_and_not_without(ssp_archive, tmp_path):
     """fmpy.ssp (fixed-step Jacobi) at h = 1e-5 s, 0.2 rev at 1200 rpm: stable with the stiffness and
     damping connections; without them (zero-order hold) the eccentricity diverges within ~150 steps."""
-    result = ssp_run.simulate_with("fmpy", ssp_archive, step=H, t_end=0.01)
+    result = ssp_tools.simulate_with("fmpy", ssp_archive, step=H, t_end=0.01)
     e = np.hypot(result["mechanism.e_x"], result["mechanism.e_y"])
     assert np.all(np.isfinite(e)) and 20e-6 < e.max() < 45e-6      # monolithic reference: 30.6 µm
     tangent = ("stiffness_xx", "stiffness_xy", "stiffness_yy", "damping_xx", "damping_xy", "damping_yy")

@@ -86,10 +86,10 @@ def test_adaptive_scheme_meets_its_tolerance_and_rolls_back_exactly(tmp_path, ca
 
 def test_adaptive_without_rejections_equals_the_fixed_step_at_half_the_step(ball_bearing_fmu):
     """Rollback through the FMU's get/set state is exact: no rejection -> the fixed-step run at H/2."""
-    from mechanism.adaptive import run_adaptive_config
+    from mechanism.run import run_adaptive
     from mechanism.run import RunConfig, run
     config = RunConfig(rpm=1200, revs=0.02, fmu=str(ball_bearing_fmu), progress=False)
-    adaptive = run_adaptive_config(config, tol=1.0, h_max=1.25e-6, initial_step=1.25e-6)
+    adaptive = run_adaptive(config, tol=1.0, h_max=1.25e-6, initial_step=1.25e-6)
     fixed = run(RunConfig(rpm=1200, revs=0.02, fmu=str(ball_bearing_fmu), step=6.25e-7, progress=False))
     assert adaptive.ok and adaptive.meta["rejected_steps"] == 0 and adaptive.meta["state_saves"] > 0
     assert adaptive.data.shape == fixed.data.shape

@@ -27,7 +27,8 @@
  *     the interpreter is finalised once, by pythonfmu's worker thread, while the process is still
  *     intact, and pythonfmu's later double release of its state object becomes a no-op. This library
  *     pins itself (RTLD_NODELETE), so the handler runs at process exit, not at dlclose;
- *   - never passes a NULL category to the host's logger;
+ *   - passes the host's callbacks to pythonfmu unchanged (the slaves find the host's logger through them,
+ *     fmu_bearing/slaves HostLogger); its own messages carry a category, never NULL;
  *   - implements fmi2GetDirectionalDerivative from the FMU's tangent outputs when the build gives it a
  *     table (unknown, known) -> output holding d unknown / d known (see fmu_bearing/native/build.py);
  *     pythonfmu 0.7 does not support that call.
@@ -175,12 +176,9 @@ static struct {
 
 /* ---- one instance: pythonfmu's component and the host's callbacks --------------------------------- */
 typedef struct {
-    fmi2Component inner;                /* pythonfmu's component */
-    fmi2CallbackFunctions callbacks;    /* what pythonfmu got: our logger, with this instance as environment */
-    fmi2CallbackLogger host_logger;
-    fmi2StepFinished host_step_finished;
-    fmi2ComponentEnvironment host_env;
-    char name[128];                     /* instance name, for the loader's own messages */
+    fmi2Component inner;                     /* pythonfmu's component */
+    const fmi2CallbackFunctions *functions;  /* the host's (FMI 2.0: valid until fmi2FreeInstance) */
+    char name[128];                          /* instance name, for the loader's own messages */
 } Instance;
 
 static int loaded = 0;           /* 1: pythonfmu's binary and Python are loaded */
@@ -225,47 +223,6 @@ static void host_log(const fmi2CallbackFunctions *f, fmi2ComponentEnvironment en
     else
         fprintf(stderr, "%s [%s]: %s\n", name ? name : "", category, text);
     free(escaped);
-}
-
-static const char *status_category(fmi2Status status) {
-    switch (status) {
-    case fmi2Warning: return "logStatusWarning";
-    case fmi2Discard: return "logStatusDiscard";
-    case fmi2Error: return "logStatusError";
-    case fmi2Fatal: return "logStatusFatal";
-    case fmi2Pending: return "logStatusPending";
-    default: return "logAll";
-    }
-}
-
-/* The logger pythonfmu calls: format, then pass to the host's logger with a category that is never NULL. */
-static void forward_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
-                           fmi2String message, ...) {
-    Instance *inst = (Instance *)env;
-    char stack[1024], *text = stack;
-    va_list ap;
-    va_start(ap, message);
-    int n = vsnprintf(stack, sizeof stack, message ? message : "", ap);
-    va_end(ap);
-    if (n >= (int)sizeof stack && (text = (char *)malloc((size_t)n + 1)) != NULL) {
-        va_start(ap, message);
-        vsnprintf(text, (size_t)n + 1, message, ap);
-        va_end(ap);
-    }
-    if (text == NULL) text = stack;
-    if (category == NULL || category[0] == '\0') category = status_category(status);
-    if (inst != NULL && inst->host_logger != NULL) {
-        fmi2CallbackFunctions f = {inst->host_logger, NULL, NULL, NULL, NULL};
-        host_log(&f, inst->host_env, name, status, category, text);
-    } else {
-        host_log(NULL, NULL, name, status, category, text);
-    }
-    if (text != stack) free(text);
-}
-
-static void forward_step_finished(fmi2ComponentEnvironment env, fmi2Status status) {
-    Instance *inst = (Instance *)env;
-    if (inst != NULL && inst->host_step_finished != NULL) inst->host_step_finished(inst->host_env, status);
 }
 
 /* Give the calling native thread a persistent Python thread state (see the header comment). */
@@ -537,18 +494,10 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type type, fmi
     }
     Instance *inst = (Instance *)calloc(1, sizeof(Instance));
     if (inst == NULL) return NULL;
-    if (functions != NULL) {
-        inst->callbacks = *functions;
-        inst->host_logger = functions->logger;
-        inst->host_step_finished = functions->stepFinished;
-        inst->host_env = functions->componentEnvironment;
-    }
-    inst->callbacks.logger = forward_logger;
-    inst->callbacks.stepFinished = functions && functions->stepFinished ? forward_step_finished : NULL;
-    inst->callbacks.componentEnvironment = inst;
+    inst->functions = functions;
     snprintf(inst->name, sizeof inst->name, "%s", instanceName ? instanceName : "");
     attach_thread();
-    inst->inner = fmi.Instantiate(instanceName, type, guid, resourceLocation, &inst->callbacks, visible, loggingOn);
+    inst->inner = fmi.Instantiate(instanceName, type, guid, resourceLocation, functions, visible, loggingOn);
     attach_thread();  /* Python may have been initialised by this call */
     if (inst->inner == NULL) {
         free(inst);
@@ -599,7 +548,7 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
                          "with respect to the eccentricity and its rate, from the tangent stiffness and damping "
                          "outputs; docs/fmu-interface.md)",
                          vUnknown[i], vKnown[j]);
-                host_log(&inst->callbacks, inst, inst->name, fmi2Error, "logStatusError", message);
+                host_log(inst->functions, inst->functions ? inst->functions->componentEnvironment : NULL, inst->name, fmi2Error, "logStatusError", message);
                 return fmi2Error;
             }
             fmi2Real partial;

@@ -1,0 +1,266 @@
+"""The master's side of the signal exchange with a bearing component.
+
+Two endpoints with the same semantics (the FMU's: outputs after a step describe the end of
+the step, for the inputs held over it):
+
+* ``FmuEndpoint``: a BallBearing (or JournalClearance) FMU through fmpy's low-level
+  ``FMU2Slave`` API: set the 6 inputs, ``doStep``, get the coupling outputs;
+* ``InProcessEndpoint``: the same force law (``fmu_bearing.ball_bearing``) called in-process,
+  so the benchmark and the tests can compare the two paths under one coupling scheme.
+
+Inputs, in order: e_x, e_y [m], v_x, v_y [m/s], omega_inner, omega_outer [rad/s].
+Coupling outputs, fetched every step: F_x, F_y [N], stiffness_xx/xy/yy [N/m],
+damping_xx/xy/yy [N s/m]. Everything else (ball loads, cage angle, ...) is *sampled*
+only at the output interval, because each value fetched through an FMU costs time.
+"""
+from __future__ import annotations
+
+import ctypes
+import shutil
+from pathlib import Path
+from typing import Mapping, Sequence
+
+from fmu_bearing.ball_bearing import BallBearing, BearingInputError
+from fmu_bearing.interface import COUPLING_OUTPUT_NAMES, JOINT_INPUT_NAMES
+from fmu_bearing.parameters import BearingParameters, from_values
+
+INPUTS = JOINT_INPUT_NAMES
+COUPLING_OUTPUTS = COUPLING_OUTPUT_NAMES
+
+
+class ExchangeError(RuntimeError):
+    """The bearing component refused a call (error status); the message says why."""
+
+
+class InProcessEndpoint:
+    """The ball-bearing force law called in-process, with the FMU's step semantics."""
+
+    kind = "in-process"
+
+    def __init__(self, parameters: BearingParameters | Mapping[str, float] | None = None,
+                 capacity: int | None = None):
+        if parameters is None or isinstance(parameters, BearingParameters):
+            params = parameters or BearingParameters()
+        else:
+            params = from_values(parameters)
+        self.bearing = BallBearing(params, capacity)
+        self.n_balls = self.bearing.n_balls
+        self.sample_names = ("cage_angle", "loaded_balls", "max_ball_load") + tuple(
+            f"ball_load_{r + 1}" for r in range(self.n_balls))
+        self.calls = 0
+        self._loads = [0.0] * self.n_balls
+        self._inputs = (0.0,) * 6
+        self._cage = float(params.cage_angle_start)
+        self._out: tuple = ()
+
+    def initialize(self, inputs: Sequence[float]) -> tuple[float, ...]:
+        """Set the start inputs and return the coupling outputs at the start time."""
+        self._inputs = tuple(float(x) for x in inputs)
+        self._evaluate()
+        return self._out[:8]
+
+    def exchange(self, t: float, h: float, inputs: Sequence[float]) -> tuple[float, ...]:
+        """Set inputs, advance over [t, t + h] with them held, return the end-of-step coupling outputs."""
+        ex, ey, vx, vy, wi, wo = inputs
+        try:
+            self.bearing.check_inputs(ex, ey, vx, vy, wi, wo)
+        except BearingInputError as err:
+            raise ExchangeError(str(err)) from None
+        self.calls += 1
+        self._inputs = (ex, ey, vx, vy, wi, wo)
+        self._cage = self.bearing.advance_cage(self._cage, wi, wo, h)
+        self._evaluate()
+        return self._out[:8]
+
+    def _evaluate(self) -> None:
+        ex, ey, vx, vy, wi, wo = self._inputs
+        self._out = self.bearing.evaluate(ex, ey, vx, vy, self._cage, wi, wo, self._loads)
+
+    def sample(self) -> list[float]:
+        out = self._out
+        return [self._cage, float(out.loaded_balls), out.max_ball_load, *self._loads]
+
+    def get_state(self):
+        return (self._cage, self._inputs, self._out, list(self._loads))
+
+    def set_state(self, state) -> None:
+        self._cage, self._inputs, self._out, loads = state
+        self._loads[:] = loads
+
+    def free_state(self, state) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+class FmuEndpoint:
+    """A bearing FMU driven through fmpy's FMU2Slave, with prebuilt ctypes buffers for the hot path."""
+
+    kind = "fmu"
+
+    def __init__(self, fmu_path: str | Path, start_values: Mapping[str, float] | None = None,
+                 instance_name: str = "bearing", logging_on: bool = False):
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import (
+            FMU2Slave,
+            calloc,
+            fmi2CallbackAllocateMemoryTYPE,
+            fmi2CallbackFreeMemoryTYPE,
+            fmi2CallbackFunctions,
+            fmi2CallbackLoggerTYPE,
+            free,
+        )
+
+        self.path = Path(fmu_path)
+        if not self.path.is_file():
+            raise FileNotFoundError(f"FMU not found: {self.path} (build it with `python build_fmu.py`)")
+        self.md = read_model_description(str(self.path))
+        self.variables = {v.name: v for v in self.md.modelVariables}
+        missing = [n for n in INPUTS + COUPLING_OUTPUTS[:2] if n not in self.variables]
+        if missing:
+            raise ExchangeError(f"{self.path.name} lacks the variables {missing} a bearing component must have")
+        self.coupling_names = tuple(n for n in COUPLING_OUTPUTS if n in self.variables)
+        self.sample_names = tuple(v.name for v in self.md.modelVariables
+                                  if v.causality == "output" and v.name not in self.coupling_names)
+        self.messages: list[str] = []
+        self.calls = 0
+        self._unzipdir = extract(str(self.path))
+
+        def _log(component, instance, status, category, message):
+            self.messages.append(f"[{['OK', 'WARNING', 'DISCARD', 'ERROR', 'FATAL', 'PENDING'][status]}] "
+                                 f"{message.decode('utf-8', 'replace')}")
+
+        self._callbacks = fmi2CallbackFunctions()
+        self._callbacks.logger = fmi2CallbackLoggerTYPE(_log)
+        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        try:
+            from fmpy.logging import addLoggerProxy
+            addLoggerProxy(ctypes.byref(self._callbacks))
+        except Exception:  # pragma: no cover - the proxy only formats variadic messages
+            pass
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzipdir,
+                             modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=instance_name)
+        self._instantiated = False
+        self._start_values = dict(start_values or {})
+        for name in self._start_values:
+            v = self.variables.get(name)
+            if v is None or v.causality not in ("parameter", "input"):
+                params = sorted(n for n, x in self.variables.items() if x.causality == "parameter")
+                raise ExchangeError(f"{self.path.name} has no parameter {name!r} (parameters: {', '.join(params)})")
+        n_real = ctypes.c_uint * 6
+        self._vr_in = n_real(*(self.variables[n].valueReference for n in INPUTS))
+        self._val_in = (ctypes.c_double * 6)()
+        nc = len(self.coupling_names)
+        self._vr_out = (ctypes.c_uint * nc)(*(self.variables[n].valueReference for n in self.coupling_names))
+        self._val_out = (ctypes.c_double * nc)()
+        self._real_samples = [n for n in self.sample_names if self.variables[n].type == "Real"]
+        self._int_samples = [n for n in self.sample_names if self.variables[n].type == "Integer"]
+        self._bool_samples = [n for n in self.sample_names if self.variables[n].type == "Boolean"]
+        self.sample_names = tuple(self._real_samples + self._int_samples + self._bool_samples)
+        self._vr_sr = (ctypes.c_uint * len(self._real_samples))(*(self.variables[n].valueReference
+                                                                    for n in self._real_samples))
+        self._val_sr = (ctypes.c_double * len(self._real_samples))()
+        self._vr_si = (ctypes.c_uint * len(self._int_samples))(*(self.variables[n].valueReference
+                                                                   for n in self._int_samples))
+        self._val_si = (ctypes.c_int * len(self._int_samples))()
+        self._vr_sb = (ctypes.c_uint * len(self._bool_samples))(*(self.variables[n].valueReference
+                                                                   for n in self._bool_samples))
+        self._val_sb = (ctypes.c_int * len(self._bool_samples))()
+        n_balls = self.variables.get("n_balls")
+        self.n_balls = int(self._start_values.get("n_balls", n_balls.start if n_balls is not None else 0))
+
+    def _fail(self, what: str, err: Exception) -> ExchangeError:
+        detail = "; ".join(self.messages[-3:]) or str(err)
+        return ExchangeError(f"{self.path.name}: {what} failed: {detail}")
+
+    def initialize(self, inputs: Sequence[float]) -> tuple[float, ...]:
+        """Instantiate, apply start values and start inputs, initialise; return the coupling outputs at t0."""
+        fmu = self.fmu
+        try:
+            fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
+            self._instantiated = True
+            fmu.setupExperiment(startTime=0.0)
+            fmu.enterInitializationMode()
+            for name, value in self._start_values.items():
+                v = self.variables[name]
+                if v.type == "Integer":
+                    fmu.setInteger([v.valueReference], [int(value)])
+                elif v.type == "Boolean":
+                    fmu.setBoolean([v.valueReference], [bool(value)])
+                else:
+                    fmu.setReal([v.valueReference], [float(value)])
+            self._set_inputs(inputs)
+            fmu.exitInitializationMode()
+            fmu.fmi2GetReal(fmu.component, self._vr_out, len(self._vr_out), self._val_out)
+        except Exception as err:
+            raise self._fail("initialisation", err) from None
+        return self._coupling()
+
+    def _set_inputs(self, inputs: Sequence[float]) -> None:
+        val = self._val_in
+        val[0], val[1], val[2], val[3], val[4], val[5] = inputs
+        self.fmu.fmi2SetReal(self.fmu.component, self._vr_in, 6, val)
+
+    def _coupling(self) -> tuple[float, ...]:
+        out = tuple(self._val_out)
+        if len(out) < 8:  # a component without tangent matrices: zeros (only force-held schemes then make sense)
+            out = out + (0.0,) * (8 - len(out))
+        return out
+
+    def exchange(self, t: float, h: float, inputs: Sequence[float]) -> tuple[float, ...]:
+        fmu = self.fmu
+        try:
+            self._set_inputs(inputs)
+            fmu.fmi2DoStep(fmu.component, t, h, 1)
+            fmu.fmi2GetReal(fmu.component, self._vr_out, len(self._vr_out), self._val_out)
+        except Exception as err:
+            raise self._fail(f"doStep at t = {t:.9g} s", err) from None
+        self.calls += 1
+        return self._coupling()
+
+    def sample(self) -> list[float]:
+        fmu = self.fmu
+        if self._real_samples:
+            fmu.fmi2GetReal(fmu.component, self._vr_sr, len(self._vr_sr), self._val_sr)
+        if self._int_samples:
+            fmu.fmi2GetInteger(fmu.component, self._vr_si, len(self._vr_si), self._val_si)
+        if self._bool_samples:
+            fmu.fmi2GetBoolean(fmu.component, self._vr_sb, len(self._vr_sb), self._val_sb)
+        return list(self._val_sr) + [float(x) for x in self._val_si] + [float(bool(x)) for x in self._val_sb]
+
+    def get_state(self):
+        try:
+            return self.fmu.getFMUState()
+        except Exception as err:
+            raise self._fail("getFMUState", err) from None
+
+    def set_state(self, state) -> None:
+        try:
+            self.fmu.setFMUState(state)
+        except Exception as err:
+            raise self._fail("setFMUState", err) from None
+
+    def free_state(self, state) -> None:
+        self.fmu.freeFMUState(state)
+
+    def close(self) -> None:
+        """Terminate and free the instance (always safe to call, also after an error)."""
+        if self._instantiated:
+            try:
+                self.fmu.terminate()
+            except Exception:
+                pass
+            try:
+                self.fmu.freeInstance()
+            except Exception:
+                pass
+            self._instantiated = False
+        shutil.rmtree(self._unzipdir, ignore_errors=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

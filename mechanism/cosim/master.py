@@ -1,0 +1,283 @@
+"""The co-simulation master: integrates the mechanism and exchanges signals with the bearing each step.
+
+One loop serves every run: the bearing component is an *endpoint* (the FMU through fmpy,
+or the same force law in-process, ``mechanism.cosim.endpoints``) and the coupling *scheme*
+(``mechanism.cosim.coupling``) says what force the mechanism sees within a step. With no
+bearing (the ideal joint) the same loop integrates the constrained mechanism alone.
+
+Each communication step [t_n, t_n + h]:
+1. (Jacobi ordering only) the component steps with the inputs u_n;
+2. the mechanism is integrated with RK4 in ``substeps`` equal substeps, the bearing force
+   given by the scheme's force model, applied through eq. (20)-(23);
+3. (Gauss-Seidel ordering) the component is given u_{n+1} (eq. 10-12 and the ring speeds)
+   and steps; its outputs F_{n+1} (and tangent matrices) are pushed to the scheme;
+4. at the output interval a sample is recorded: the end-of-step state, the force, the
+   accelerations and Lagrange multipliers of eq. (9) with that force (slider acceleration,
+   crank moment), and the component's sampled outputs (ball loads, cage angle, ...).
+
+A failure (an error status from the component, a non-finite state, constraints drifting
+beyond ``max_constraint_violation``) stops the run with a message naming the step, the
+time and the cause; the samples recorded so far are kept and the component is always freed.
+
+The step itself (1-3) and the sample (4) live in ``CouplingLoop``, shared with the adaptive
+driver (``mechanism.cosim.adaptive``), which also uses its ``snapshot``/``restore`` to roll back.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Protocol, Sequence
+
+import numpy as np
+
+from mechanism.cosim.coupling import DEFAULT_SCHEME, Exchanged, make_scheme
+from mechanism.cosim.joint import BearingLink
+from mechanism.cosim.record import BASE_COLUMNS, Recorder, RunResult
+from mechanism.multibody.integrators import rk4_step
+from mechanism.multibody.solver import System
+
+
+class Endpoint(Protocol):
+    sample_names: Sequence[str]
+    calls: int
+
+    def initialize(self, inputs: Sequence[float]) -> tuple[float, ...]: ...
+    def exchange(self, t: float, h: float, inputs: Sequence[float]) -> tuple[float, ...]: ...
+    def sample(self) -> list[float]: ...
+    def close(self) -> None: ...
+
+
+class RunFailure(RuntimeError):
+    """A run stopped early; ``step`` and ``time`` say where."""
+
+    def __init__(self, step: int, time: float, cause: str):
+        super().__init__(f"stopped at step {step} (t = {time:.9g} s): {cause}")
+        self.step, self.time, self.cause = step, time, cause
+
+
+@dataclass
+class MasterSettings:
+    """Fixed-step master settings (SI)."""
+
+    t_end: float
+    step: float = 1e-5                   # communication step h [s]
+    output_interval: float = 1e-5        # sampling interval, rounded to a multiple of h [s]
+    scheme: str = DEFAULT_SCHEME
+    substep_limit: float = 1.0           # substeps keep h_sub * (omega_contact + damping rate) <= this
+    max_substeps: int = 64
+    max_constraint_violation: float = 1e-4   # |Phi| beyond this [m or rad] is divergence
+    progress: bool = True
+    description: str = "co-simulation"
+
+
+#: observe(q, qd, qdd, lam, t) -> named observables of the mechanism (slider_x, crank_moment, ...)
+Observer = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float], dict]
+
+
+def _sym_eig_max(a: float, b: float, c: float) -> float:
+    """Largest eigenvalue of the symmetric 2x2 matrix [[a, b], [b, c]]."""
+    return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
+
+
+def substeps(h: float, x: Exchanged, mobility: float, limit: float, cap: int) -> int:
+    """RK4 substeps per communication step for the interface-Jacobian force model.
+
+    The tangent stiffness k and damping c (largest eigenvalues) acting on the mechanism's
+    relative mobility g give a contact frequency sqrt(k g) and a damping rate c g; RK4 is
+    stable up to about 2.8 in h_sub times either, so ``limit`` = 1 keeps a wide margin.
+    """
+    k = max(_sym_eig_max(x.k_xx, x.k_xy, x.k_yy), 0.0)
+    c = max(_sym_eig_max(x.c_xx, x.c_xy, x.c_yy), 0.0)
+    rate = math.sqrt(k * mobility) + c * mobility
+    return max(1, min(cap, math.ceil(h * rate / limit)))
+
+
+class CouplingLoop:
+    """The pieces of one co-simulation run, shared by ``run_master`` and ``mechanism.cosim.adaptive``.
+
+    It owns the coupling scheme, the exchanged inputs and force, and the substep counters;
+    ``start`` initialises the component, ``advance`` performs one communication step
+    (steps 1-3 of the module docstring) and ``row`` builds a sample (step 4). ``snapshot``
+    and ``restore`` save and roll back everything a step changes besides the mechanism's
+    state y: the scheme's history, the last exchange, and the component's state (through
+    the endpoint's ``get_state``/``set_state``, i.e. the FMU's get/set FMU state).
+    """
+
+    def __init__(self, system: System, settings: MasterSettings, observe: Observer,
+                 link: BearingLink | None = None, endpoint: Endpoint | None = None,
+                 reaction_force: Callable[[np.ndarray, np.ndarray], tuple[float, float]] | None = None):
+        self.system, self.settings, self.observe = system, settings, observe
+        self.link, self.endpoint, self.reaction_force = link, endpoint, reaction_force
+        self.sample_names = list(endpoint.sample_names) if endpoint is not None else []
+        self.columns = list(BASE_COLUMNS) + [c for c in self.sample_names if c not in BASE_COLUMNS]
+        self.n = system.n
+        self.scheme = make_scheme(settings.scheme) if endpoint is not None else None
+        self.inputs = None
+        self.force = (0.0, 0.0)
+        self.mobility = 0.0
+        self.substeps_max = 1
+        self.substeps_total = 0
+        n, scheme, applied = self.n, self.scheme, system.applied_forces
+
+        def rhs(tau, y):
+            q, qd = y[:n], y[n:]
+            Q = applied(q, qd, tau)
+            if link is not None:
+                ex, ey, vx, vy, _, _ = link.inputs(q, qd)
+                Fx, Fy = scheme.force(tau, ex, ey, vx, vy)
+                link.generalized_force(q, ex, ey, Fx, Fy, Q)
+            qdd = system.accelerations(q, qd, tau, Q)[0]
+            return np.concatenate((qd, qdd))
+        self.rhs = rhs
+
+    def start(self, y: np.ndarray) -> None:
+        """Initialise the component with the inputs of state y at t = 0 (no-op without a component)."""
+        if self.endpoint is None:
+            return
+        n, link = self.n, self.link
+        u = link.inputs(y[:n], y[n:])
+        out = self.endpoint.initialize(u)
+        self.inputs, self.force = u, out[:2]
+        self.scheme.push(Exchanged(0.0, *u[:4], *out))
+        if self.scheme.uses_tangent:
+            self.mobility = link.mobility(y[:n], 0.0)
+
+    def advance(self, y: np.ndarray, t0: float, h: float, step: int, t: float | None = None) -> np.ndarray:
+        """One communication step [t0, t0 + h] from state y; returns the state at its end.
+
+        ``t`` is the end time (default t0 + h; the fixed-step loop passes step * h).
+        Raises ``RunFailure`` (``step`` names it) or the component's error.
+        """
+        if t is None:
+            t = t0 + h
+        settings, scheme, endpoint, system = self.settings, self.scheme, self.endpoint, self.system
+        if endpoint is not None:
+            pending = endpoint.exchange(t0, h, self.inputs) if scheme.ordering == "jacobi" else None
+            scheme.begin_step(t0, h)
+            m = substeps(h, scheme.past[-1], self.mobility, settings.substep_limit,
+                         settings.max_substeps) if scheme.uses_tangent else 1
+        else:
+            m = 1
+        self.substeps_max = max(self.substeps_max, m)
+        self.substeps_total += m
+        hs = h / m
+        rhs = self.rhs
+        for k in range(m):
+            y = rk4_step(rhs, t0 + k * hs, y, hs)
+        if not np.all(np.isfinite(y)):
+            raise RunFailure(step, t, "the mechanism state is not finite (the integration diverged)")
+        n = self.n
+        q, qd = y[:n], y[n:]
+        if system.m:
+            drift = float(np.max(np.abs(system.phi(q, t))))
+            if drift > settings.max_constraint_violation:
+                raise RunFailure(step, t, f"constraint violation {drift:.3g} exceeds "
+                                          f"{settings.max_constraint_violation:g} (the integration diverged)")
+        if endpoint is not None:
+            u = self.link.inputs(q, qd)
+            if scheme.ordering == "jacobi":
+                out, used = pending, self.inputs
+            else:
+                out, used = endpoint.exchange(t0, h, u), u
+            if not all(math.isfinite(x) for x in out):
+                raise RunFailure(step, t, f"the bearing returned a non-finite force {out[:2]}")
+            scheme.push(Exchanged(t, *used[:4], *out))
+            self.inputs, self.force = u, out[:2]
+        return y
+
+    def row(self, t: float, y: np.ndarray) -> dict:
+        """The sample at time t for the end-of-step state y: observables, inputs, force, component samples."""
+        system, link, n = self.system, self.link, self.n
+        q, qd = y[:n], y[n:]
+        force = self.force
+        Q = system.applied_forces(q, qd, t)
+        if link is not None:
+            link.generalized_force(q, self.inputs[0], self.inputs[1], *force, Q)
+        qdd, lam = system.accelerations(q, qd, t, Q)
+        row = self.observe(q, qd, qdd, lam, t)
+        if link is not None:
+            ex, ey, vx, vy, wi, wo = self.inputs
+            row.update(e_x=ex, e_y=ey, v_x=vx, v_y=vy, omega_inner=wi, omega_outer=wo,
+                       F_x=force[0], F_y=force[1])
+            row.update(zip(self.sample_names, self.endpoint.sample()))
+        else:
+            row.update(e_x=0.0, e_y=0.0, v_x=0.0, v_y=0.0)
+            row["F_x"], row["F_y"] = self.reaction_force(q, lam)
+        row["time"] = t
+        row["constraint_violation"] = float(np.max(np.abs(system.phi(q, t)))) if system.m else 0.0
+        row["kinetic_energy"] = system.kinetic_energy(qd)
+        return row
+
+    def snapshot(self):
+        """Everything ``advance`` changes besides y, to roll back to (free it with ``release``)."""
+        endpoint = self.endpoint
+        fmu_state = endpoint.get_state() if endpoint is not None else None
+        past = tuple(self.scheme.past) if self.scheme is not None else ()
+        return past, self.inputs, self.force, fmu_state
+
+    def restore(self, snap) -> None:
+        """Roll back to ``snap`` (which stays valid for another restore)."""
+        past, self.inputs, self.force, fmu_state = snap
+        if self.scheme is not None:
+            self.scheme.past.clear()
+            self.scheme.past.extend(past)
+        if self.endpoint is not None:
+            self.endpoint.set_state(fmu_state)
+
+    def release(self, snap) -> None:
+        if self.endpoint is not None and snap[3] is not None:
+            self.endpoint.free_state(snap[3])
+
+
+def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: MasterSettings,
+               observe: Observer, link: BearingLink | None = None, endpoint: Endpoint | None = None,
+               reaction_force: Callable[[np.ndarray, np.ndarray], tuple[float, float]] | None = None,
+               meta: dict | None = None) -> RunResult:
+    """Integrate the mechanism from (q0, qd0) to ``settings.t_end``, co-simulated with ``endpoint`` if given.
+
+    For the ideal joint pass ``link=endpoint=None`` and ``reaction_force(q, lam)`` giving the
+    joint's force on the housing body, recorded as F_x, F_y.
+    """
+    h = settings.step
+    n_steps = int(round(settings.t_end / h))
+    every = max(1, int(round(settings.output_interval / h)))
+    loop = CouplingLoop(system, settings, observe, link, endpoint, reaction_force)
+    rec = Recorder(loop.columns, n_steps // every + 2)
+    info = dict(meta or {})
+    info.update(step_s=h, output_interval_s=every * h, t_end_s=n_steps * h,
+                scheme=loop.scheme.name if loop.scheme else "none", endpoint=getattr(endpoint, "kind", "none"))
+    y = np.concatenate((q0, qd0)).astype(float)
+    step, t = 0, 0.0
+    from tqdm import tqdm  # here, not at the top: SliderCrank.fmu packs this module and needs no tqdm at runtime
+    bar = tqdm(total=n_steps, desc=settings.description, unit="step", disable=not settings.progress,
+               mininterval=0.5, leave=False)
+    try:
+        loop.start(y)
+        rec.add(loop.row(0.0, y))
+        for step in range(1, n_steps + 1):
+            t0 = (step - 1) * h
+            t = step * h
+            y = loop.advance(y, t0, h, step, t)
+            if step % every == 0:
+                rec.add(loop.row(t, y))
+            if step % 500 == 0:
+                bar.update(500)
+    except RunFailure as err:
+        info["failure"] = {"step": err.step, "time_s": err.time, "cause": err.cause}
+        return finish(rec, info, "failed", str(err), endpoint, bar, loop)
+    except Exception as err:  # an error status from the component, a singular matrix, ...
+        cause = f"{type(err).__name__}: {err}"
+        info["failure"] = {"step": step, "time_s": t, "cause": cause}
+        return finish(rec, info, "failed", f"stopped at step {step} (t = {t:.9g} s): {cause}",
+                      endpoint, bar, loop)
+    return finish(rec, info, "completed", "", endpoint, bar, loop)
+
+
+def finish(rec: Recorder, info: dict, status: str, message: str, endpoint, bar, loop: CouplingLoop) -> RunResult:
+    """Close the progress bar and wrap the samples and counters into a RunResult."""
+    bar.close()
+    info["substeps_max"] = loop.substeps_max
+    info["substeps_total"] = loop.substeps_total
+    if endpoint is not None:
+        info["component_calls"] = endpoint.calls
+    return RunResult(rec.columns, rec.table().copy(), info, status, message)

@@ -1,0 +1,74 @@
+"""What a run records: the sample table (``Recorder``), the run's result (``RunResult``) and column units.
+
+Columns are SI; ``unit_of`` names each column's unit for CSV headers. A run that fails keeps what it
+recorded up to the failure: ``RunResult.status`` is then ``"failed"`` and ``message`` says at which
+step, at what time and why.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: units of the columns written to timeseries.csv (ball_load_<r> are N)
+UNITS = {
+    "time": "s", "crank_angle": "rad", "e_x": "m", "e_y": "m", "v_x": "m/s", "v_y": "m/s",
+    "F_x": "N", "F_y": "N", "slider_x": "m", "slider_v": "m/s", "slider_a": "m/s^2",
+    "crank_moment": "N.m", "constraint_violation": "m or rad", "omega_inner": "rad/s", "omega_outer": "rad/s",
+    "cage_angle": "rad", "loaded_balls": "1", "max_ball_load": "N", "penetration": "m",
+    "contact_force": "N", "kinetic_energy": "J", "in_contact": "1", "impact_velocity": "m/s",
+    "normal_velocity": "m/s", "stiffness_skew": "N/m",
+}
+BASE_COLUMNS = ("time", "crank_angle", "e_x", "e_y", "v_x", "v_y", "F_x", "F_y", "slider_x", "slider_v",
+                "slider_a", "crank_moment", "constraint_violation", "omega_inner", "omega_outer",
+                "kinetic_energy")
+
+
+def unit_of(column: str) -> str:
+    return "N" if column.startswith("ball_load_") else UNITS.get(column, "1")
+
+
+class Recorder:
+    """Preallocated table of samples; rows are appended in time order."""
+
+    def __init__(self, columns: list[str], capacity: int):
+        self.columns = list(columns)
+        self.index = {c: i for i, c in enumerate(self.columns)}
+        self.data = np.full((max(capacity, 1), len(self.columns)), np.nan)
+        self.rows = 0
+
+    def add(self, values: dict[str, float]) -> None:
+        if self.rows == len(self.data):
+            self.data = np.vstack([self.data, np.full_like(self.data, np.nan)])
+        row = self.data[self.rows]
+        for name, value in values.items():
+            row[self.index[name]] = value
+        self.rows += 1
+
+    def table(self) -> np.ndarray:
+        return self.data[: self.rows]
+
+
+@dataclass
+class RunResult:
+    """A run's samples (one row per output time) and what produced them."""
+
+    columns: list[str]
+    data: np.ndarray
+    meta: dict = field(default_factory=dict)
+    status: str = "completed"
+    message: str = ""
+
+    def __getitem__(self, column: str) -> np.ndarray:
+        return self.data[:, self.columns.index(column)]
+
+    def has(self, column: str) -> bool:
+        return column in self.columns
+
+    @property
+    def ball_load_columns(self) -> list[str]:
+        return [c for c in self.columns if c.startswith("ball_load_")]
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "completed"
