@@ -534,9 +534,16 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
     attach_thread();
 #if DD_COUNT > 0
     static const unsigned table[DD_COUNT][3] = DD_TABLE;
-    size_t i, j, k;
+    size_t i, j, k, n = nUnknown * nKnown;
+    if (n == 0) {
+        for (i = 0; i < nUnknown; i++) dvUnknown[i] = 0.0;
+        return fmi2OK;
+    }
+    fmi2ValueReference *sources = (fmi2ValueReference *)malloc(n * sizeof *sources);
+    fmi2Real *partials = (fmi2Real *)malloc(n * sizeof *partials);
+    fmi2Status status = fmi2Error;
+    if (sources == NULL || partials == NULL) goto done;
     for (i = 0; i < nUnknown; i++) {
-        double sum = 0.0;
         for (j = 0; j < nKnown; j++) {
             for (k = 0; k < DD_COUNT; k++)
                 if (table[k][0] == vUnknown[i] && table[k][1] == vKnown[j]) break;
@@ -548,17 +555,25 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
                          "with respect to the eccentricity and its rate, from the tangent stiffness and damping "
                          "outputs; docs/fmu-interface.md)",
                          vUnknown[i], vKnown[j]);
-                host_log(inst->functions, inst->functions ? inst->functions->componentEnvironment : NULL, inst->name, fmi2Error, "logStatusError", message);
-                return fmi2Error;
+                host_log(inst->functions, inst->functions ? inst->functions->componentEnvironment : NULL, inst->name,
+                         fmi2Error, "logStatusError", message);
+                goto done;
             }
-            fmi2Real partial;
-            fmi2Status s = fmi.GetReal(inst->inner, &table[k][2], 1, &partial);
-            if (s > fmi2Warning) return s;
-            sum += partial * dvKnown[j];
+            sources[i * nKnown + j] = table[k][2];
         }
-        dvUnknown[i] = sum;
     }
-    return fmi2OK;
+    status = fmi.GetReal(inst->inner, sources, n, partials);  /* the tangent outputs, in one call */
+    if (status <= fmi2Warning) {
+        for (i = 0; i < nUnknown; i++) {
+            double sum = 0.0;
+            for (j = 0; j < nKnown; j++) sum += partials[i * nKnown + j] * dvKnown[j];
+            dvUnknown[i] = sum;
+        }
+    }
+done:
+    free(sources);
+    free(partials);
+    return status;
 #else
     return fmi.GetDirectionalDerivative(inst->inner, vUnknown, nUnknown, vKnown, nKnown, dvKnown, dvUnknown);
 #endif
