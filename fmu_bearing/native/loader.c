@@ -22,11 +22,17 @@
  *   - gives every native thread that calls the FMU one persistent Python thread state, so pythonfmu's
  *     PyGILState_Ensure/Release per call only takes and drops the GIL instead of creating and deleting a
  *     thread state (and its frame stack) on every call: the cost of a call from a native host;
+ *   - initialises the interpreter itself (Py_InitializeEx(0): no signal handlers in the host) on the
+ *     thread of the first fmi2Instantiate, when the host has not, and never finalises it: pythonfmu's
+ *     worker thread then sees an initialised Python and neither initialises nor finalises it. Finalising
+ *     an embedded interpreter at process exit from pythonfmu's worker thread crashed some hosts and can
+ *     deadlock others (threading._shutdown waits for the host thread that imported `threading`); the
+ *     FMU holds nothing that needs Python-level clean-up, so the process just exits;
  *   - calls pythonfmu's finalizePythonInterpreter() from an exit handler registered after pythonfmu's
  *     binary was loaded, so it runs before pythonfmu's own static destructor and library destructor:
- *     the interpreter is finalised once, by pythonfmu's worker thread, while the process is still
- *     intact, and pythonfmu's later double release of its state object becomes a no-op. This library
- *     pins itself (RTLD_NODELETE), so the handler runs at process exit, not at dlclose;
+ *     it only drops pythonfmu's state object (whose worker thread has long returned), and pythonfmu's
+ *     later double release of that object becomes a no-op. This library pins itself (RTLD_NODELETE), so
+ *     the handler runs at process exit, not at dlclose, and the interpreter outlives any reload;
  *   - passes the host's callbacks to pythonfmu unchanged (the slaves find the host's logger through them,
  *     fmu_bearing/slaves HostLogger); its own messages carry a category, never NULL;
  *   - implements fmi2GetDirectionalDerivative from the FMU's tangent outputs when the build gives it a
@@ -167,6 +173,7 @@ static struct {
 typedef int PyGILState_STATE;
 static struct {
     int (*IsInitialized)(void);
+    void (*InitializeEx)(int);
     void *(*GILState_GetThisThreadState)(void);
     PyGILState_STATE (*GILState_Ensure)(void);
     void *(*Eval_SaveThread)(void);
@@ -183,8 +190,7 @@ typedef struct {
 
 static int loaded = 0;           /* 1: pythonfmu's binary and Python are loaded */
 static char load_error[4096];    /* why loading failed (reported by every fmi2Instantiate) */
-static volatile unsigned python_generation = 1;  /* bumped when the interpreter is finalised */
-static THREAD_LOCAL unsigned thread_generation;  /* == python_generation: this thread has a thread state */
+static THREAD_LOCAL int thread_attached;  /* 1: this thread has its persistent Python thread state */
 
 #ifndef _WIN32
 static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -227,13 +233,12 @@ static void host_log(const fmi2CallbackFunctions *f, fmi2ComponentEnvironment en
 
 /* Give the calling native thread a persistent Python thread state (see the header comment). */
 static void attach_thread(void) {
-    unsigned generation = python_generation;
-    if (thread_generation == generation || py.IsInitialized == NULL || !py.IsInitialized()) return;
+    if (thread_attached || py.IsInitialized == NULL || !py.IsInitialized()) return;
     if (py.GILState_GetThisThreadState() == NULL) {
         py.GILState_Ensure();   /* creates this thread's state (count 1) and takes the GIL */
         py.Eval_SaveThread();   /* drops the GIL, keeps the state: later Ensure/Release only switch the GIL */
     }
-    thread_generation = generation;
+    thread_attached = 1;
 }
 
 /* ---- platform layer: libraries, own path, exit handler -------------------------------------------- */
@@ -296,9 +301,8 @@ static void pin_self(const char *path) {
 
 static void finalize_at_exit(void) {
     if (fmi.finalize != NULL) {
-        python_generation++;   /* thread states die with the interpreter */
-        fmi.finalize();        /* pythonfmu: drop its state object; Py_Finalize on its worker thread if it
-                                  initialised Python and no instance is alive */
+        fmi.finalize();  /* pythonfmu: drop its state object once, now (it finalises nothing: see above) */
+        fmi.finalize = NULL;
     }
 }
 
@@ -311,13 +315,15 @@ static int resolve_python(Library lib) {
 #define RESOLVE(field, name)                                                                   \
     py.field = (lib != NULL) ? lib_sym(lib, name) : process_sym(name);
     RESOLVE(IsInitialized, "Py_IsInitialized")
+    RESOLVE(InitializeEx, "Py_InitializeEx")
     RESOLVE(GILState_GetThisThreadState, "PyGILState_GetThisThreadState")
     RESOLVE(GILState_Ensure, "PyGILState_Ensure")
     RESOLVE(Eval_SaveThread, "PyEval_SaveThread")
     RESOLVE(SetPythonHome, "Py_SetPythonHome")
     RESOLVE(DecodeLocale, "Py_DecodeLocale")
 #undef RESOLVE
-    return py.IsInitialized && py.GILState_GetThisThreadState && py.GILState_Ensure && py.Eval_SaveThread;
+    return py.IsInitialized && py.InitializeEx && py.GILState_GetThisThreadState && py.GILState_Ensure &&
+           py.Eval_SaveThread;
 }
 
 static int try_library(const char *path, char *report, size_t size) {
@@ -469,6 +475,11 @@ static int ensure_loaded(void) {
         return 0;
     }
     fmi.finalize = (void (*)(void))lib_sym(lib, "finalizePythonInterpreter");
+    if (!py.IsInitialized()) {
+        /* Ours, on this thread; it stays initialised until the process ends (see the header comment). */
+        py.InitializeEx(0);
+        py.Eval_SaveThread();  /* drop the GIL; this thread keeps the main thread state */
+    }
     pin_self(self);
     atexit(finalize_at_exit);  /* registered after pythonfmu's static destructors: runs before them */
     loaded = 1;
