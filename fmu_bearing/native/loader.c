@@ -354,7 +354,7 @@ static int try_library(const char *path, char *report, size_t size) {
 /* Ask an interpreter where its shared library is: lines "home", then candidate paths. */
 static int try_interpreter(const char *python, char *report, size_t size) {
     char command[1024], line[4096], home[4096] = "";
-    int found = 0, lines = 0;
+    int found = 0, lines = 0, own_library = 0;
     static const char script[] =
         "import os, sys, sysconfig as s; v = s.get_config_var; d = v('LIBDIR') or ''; print(sys.base_prefix); "
         "[print(os.path.join(d, n)) for n in (v('INSTSONAME'), v('LDLIBRARY')) if n and '" LIB_SUFFIX "' in n]";
@@ -372,7 +372,7 @@ static int try_interpreter(const char *python, char *report, size_t size) {
         }
         if (!found && line[0] != '\0') {
             if (access(line, R_OK) == 0) {
-                found = try_library(line, report, size);
+                found = own_library = try_library(line, report, size);
             } else {
                 const char *base = strrchr(line, '/');
                 appendf(report, size, "\n  %s (from %s): no such file", line, python);
@@ -385,7 +385,8 @@ static int try_interpreter(const char *python, char *report, size_t size) {
         appendf(report, size, "\n  %s: not found or failed (exit status %d)", python, status);
     else if (lines == 1 && !found)
         appendf(report, size, "\n  %s: has no shared libpython (built without --enable-shared)", python);
-    if (found && home[0] != '\0' && py.SetPythonHome != NULL && py.DecodeLocale != NULL && !py.IsInitialized()) {
+    /* its home only with its own library (one found by name may belong to another installation) */
+    if (own_library && home[0] != '\0' && py.SetPythonHome != NULL && py.DecodeLocale != NULL && !py.IsInitialized()) {
         wchar_t *w = py.DecodeLocale(home, NULL);
         if (w != NULL) {
             wcsncpy(python_home, w, sizeof python_home / sizeof python_home[0] - 1);
