@@ -33,8 +33,8 @@
  *     it only drops pythonfmu's state object (whose worker thread has long returned), and pythonfmu's
  *     later double release of that object becomes a no-op. This library pins itself (RTLD_NODELETE), so
  *     the handler runs at process exit, not at dlclose, and the interpreter outlives any reload;
- *   - passes the host's callbacks to pythonfmu unchanged (the slaves find the host's logger through them,
- *     fmu_bearing/slaves HostLogger); its own messages carry a category, never NULL;
+ *   - never passes a NULL category to the host's logger (pythonfmu's own messages go through a wrapper),
+ *     and tells the FMU's Python side the host's own callbacks (bearingLoaderHostCallbacks);
  *   - implements fmi2GetDirectionalDerivative from the FMU's tangent outputs when the build gives it a
  *     table (unknown, known) -> output holding d unknown / d known (see fmu_bearing/native/build.py);
  *     pythonfmu 0.7 does not support that call.
@@ -183,10 +183,19 @@ static struct {
 
 /* ---- one instance: pythonfmu's component and the host's callbacks --------------------------------- */
 typedef struct {
-    fmi2Component inner;                     /* pythonfmu's component */
-    const fmi2CallbackFunctions *functions;  /* the host's (FMI 2.0: valid until fmi2FreeInstance) */
-    char name[128];                          /* instance name, for the loader's own messages */
+    fmi2Component inner;                /* pythonfmu's component */
+    fmi2CallbackFunctions callbacks;    /* what pythonfmu got: our logger, with this instance as environment */
+    fmi2CallbackLogger host_logger;
+    fmi2StepFinished host_step_finished;
+    fmi2ComponentEnvironment host_env;
+    const fmi2CallbackFunctions *host_functions;  /* the host's own struct (FMI: valid until fmi2FreeInstance) */
+    char name[128];                     /* instance name, for the loader's own messages */
 } Instance;
+
+/* The live instances, so bearingLoaderHostCallbacks can tell one of ours from any other pointer without
+   dereferencing it. */
+#define MAX_LIVE 4096
+static Instance *live[MAX_LIVE];
 
 static int loaded = 0;           /* 1: pythonfmu's binary and Python are loaded */
 static char load_error[4096];    /* why loading failed (reported by every fmi2Instantiate) */
@@ -229,6 +238,47 @@ static void host_log(const fmi2CallbackFunctions *f, fmi2ComponentEnvironment en
     else
         fprintf(stderr, "%s [%s]: %s\n", name ? name : "", category, text);
     free(escaped);
+}
+
+static const char *status_category(fmi2Status status) {
+    switch (status) {
+    case fmi2Warning: return "logStatusWarning";
+    case fmi2Discard: return "logStatusDiscard";
+    case fmi2Error: return "logStatusError";
+    case fmi2Fatal: return "logStatusFatal";
+    case fmi2Pending: return "logStatusPending";
+    default: return "logAll";
+    }
+}
+
+/* The logger pythonfmu calls: format, then pass to the host's logger with a category that is never NULL. */
+static void forward_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
+                           fmi2String message, ...) {
+    Instance *inst = (Instance *)env;
+    char stack[1024], *text = stack;
+    va_list ap;
+    va_start(ap, message);
+    int n = vsnprintf(stack, sizeof stack, message ? message : "", ap);
+    va_end(ap);
+    if (n >= (int)sizeof stack && (text = (char *)malloc((size_t)n + 1)) != NULL) {
+        va_start(ap, message);
+        vsnprintf(text, (size_t)n + 1, message, ap);
+        va_end(ap);
+    }
+    if (text == NULL) text = stack;
+    if (category == NULL || category[0] == '\0') category = status_category(status);
+    if (inst != NULL && inst->host_logger != NULL) {
+        fmi2CallbackFunctions f = {inst->host_logger, NULL, NULL, NULL, NULL};
+        host_log(&f, inst->host_env, name, status, category, text);
+    } else {
+        host_log(NULL, NULL, name, status, category, text);
+    }
+    if (text != stack) free(text);
+}
+
+static void forward_step_finished(fmi2ComponentEnvironment env, fmi2Status status) {
+    Instance *inst = (Instance *)env;
+    if (inst != NULL && inst->host_step_finished != NULL) inst->host_step_finished(inst->host_env, status);
 }
 
 /* Give the calling native thread a persistent Python thread state (see the header comment). */
@@ -487,6 +537,29 @@ static int ensure_loaded(void) {
     return 1;
 }
 
+static void remember(Instance *inst, int add) {
+    LOCK();
+    for (int i = 0; i < MAX_LIVE; i++) {
+        if (add ? live[i] == NULL : live[i] == inst) {
+            live[i] = add ? inst : NULL;
+            break;
+        }
+    }
+    UNLOCK();
+}
+
+/* For the FMU's Python side (fmu_bearing.slaves.HostLogger): the host's own callback functions behind the
+   environment pythonfmu was given (one of this loader's instances), so the slave can send an error to the
+   host with logging off and recognise the host's logger; NULL for any other pointer. */
+EXPORT const fmi2CallbackFunctions *bearingLoaderHostCallbacks(const void *env) {
+    const fmi2CallbackFunctions *found = NULL;
+    LOCK();
+    for (int i = 0; i < MAX_LIVE && found == NULL; i++)
+        if (env != NULL && live[i] == (const Instance *)env) found = live[i]->host_functions;
+    UNLOCK();
+    return found;
+}
+
 /* ---- exported FMI 2.0 functions ------------------------------------------------------------------- */
 EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char *fmi2GetVersion(void) { return "2.0"; }
@@ -506,12 +579,22 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type type, fmi
     }
     Instance *inst = (Instance *)calloc(1, sizeof(Instance));
     if (inst == NULL) return NULL;
-    inst->functions = functions;
+    if (functions != NULL) {
+        inst->callbacks = *functions;
+        inst->host_logger = functions->logger;
+        inst->host_step_finished = functions->stepFinished;
+        inst->host_env = functions->componentEnvironment;
+        inst->host_functions = functions;
+    }
+    inst->callbacks.logger = forward_logger;
+    inst->callbacks.stepFinished = functions && functions->stepFinished ? forward_step_finished : NULL;
+    inst->callbacks.componentEnvironment = inst;
     snprintf(inst->name, sizeof inst->name, "%s", instanceName ? instanceName : "");
     attach_thread();
-    inst->inner = fmi.Instantiate(instanceName, type, guid, resourceLocation, functions, visible, loggingOn);
-    attach_thread();  /* Python may have been initialised by this call */
+    remember(inst, 1);
+    inst->inner = fmi.Instantiate(instanceName, type, guid, resourceLocation, &inst->callbacks, visible, loggingOn);
     if (inst->inner == NULL) {
+        remember(inst, 0);
         free(inst);
         return NULL;
     }
@@ -523,6 +606,7 @@ EXPORT void fmi2FreeInstance(fmi2Component c) {
     if (inst == NULL) return;
     attach_thread();
     fmi.FreeInstance(inst->inner);
+    remember(inst, 0);
     free(inst);
 }
 
@@ -567,8 +651,7 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
                          "with respect to the eccentricity and its rate, from the tangent stiffness and damping "
                          "outputs; docs/fmu-interface.md)",
                          vUnknown[i], vKnown[j]);
-                host_log(inst->functions, inst->functions ? inst->functions->componentEnvironment : NULL, inst->name,
-                         fmi2Error, "logStatusError", message);
+                host_log(inst->host_functions, inst->host_env, inst->name, fmi2Error, "logStatusError", message);
                 goto done;
             }
             sources[i * nKnown + j] = table[k][2];
