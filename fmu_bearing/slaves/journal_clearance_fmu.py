@@ -72,7 +72,11 @@ class JournalClearance(Fmi2Slave):
         # errors reach the host even with logging off
         self._host_log = HostLogger(kwargs.get("logger"), self.instance_name, kwargs.get("resources"))
         guard_pythonfmu_exit(self.resources)     # pythonfmu 0.7's exit-time double free (fmu_bearing/slaves)
-        release_on_free(self)                      # the last fmi2FreeInstance undoes the FMU's imports
+        try:
+            release_on_free(self)                  # the last fmi2FreeInstance undoes the FMU's imports
+        except Exception as err:                   # fmi2Instantiate returns NULL: say why, also with logging off
+            self._host_log(3, f"instantiation failed: {err!r}")
+            raise
         self._joint = None                         # physics.ClearanceJoint, built at exit of initialisation
         self._terminated = False                   # fmi2Terminate was called: no more steps
         self._pending_error = None                 # a refused setFMUstate, reported by the next doStep

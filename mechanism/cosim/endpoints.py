@@ -397,7 +397,9 @@ class Fmu3Endpoint(_FmuBase):
         """[(getter suffix, vr array, value buffer, column names)] per type, in the order Float64, Int32,
         UInt64, Boolean (the FMI 2.0 endpoint's order: Reals, then Integers, then Booleans)."""
         plan = []
-        outputs = [v for v in self.md.modelVariables if v.causality == "output" and v.name not in self.coupling_names]
+        # life outputs are run-level figures, read once at the end (life_outputs), not sampled (as FmuEndpoint)
+        outputs = [v for v in self.md.modelVariables if v.causality == "output" and v.name not in self.coupling_names
+                   and v.name not in life.LIFE_NAMES]
         for type_name, (ctype, suffix) in _SAMPLE_TYPES.items():
             names, vrs, count = [], [], 0
             for v in outputs:
