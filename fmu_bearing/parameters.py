@@ -116,12 +116,12 @@ def validate(p: BearingParameters, capacity: int | None = None) -> None:
             raise BearingParameterError(f.name, v, "must be a finite number")
         if f.type in ("int", int) and (isinstance(v, bool) or not isinstance(v, int)):
             raise BearingParameterError(f.name, v, "must be an integer")
+        if f.name == "n_balls" and v < 3:
+            raise BearingParameterError("n_balls", v, "a ball bearing needs at least 3 balls")
         lo, hi = RANGES.get(f.name, (-math.inf, math.inf))
         if not isinstance(v, bool) and not lo <= v <= hi:
             unit = f.metadata.get("unit", "").strip("1")
             raise BearingParameterError(f.name, v, f"outside its range [{lo:g}, {hi:g}] {unit}".rstrip())
-    if p.n_balls < 3:
-        raise BearingParameterError("n_balls", p.n_balls, "a ball bearing needs at least 3 balls")
     if capacity is not None and p.n_balls > capacity:
         raise BearingParameterError("n_balls", p.n_balls,
                                     f"exceeds the FMU's capacity of {capacity} balls (build one with "
