@@ -90,7 +90,7 @@ RANGES = {
     "outer_race_diameter": (1e-4, 10.0),
     "bore_diameter": (0.0, 10.0),
     "outside_diameter": (0.0, 10.0),
-    "radial_clearance": (0.0, 1e-2),
+    "radial_clearance": (-math.inf, 1e-2),        # negative = preload, bounded below with its reason
     "youngs_modulus": (1e6, 1e13),
     "inner_groove_conformity": (-math.inf, 10.0),     # > 0.5: checked below with its reason
     "outer_groove_conformity": (-math.inf, 10.0),
