@@ -73,7 +73,8 @@ def cmd_run(args) -> int:
 
 
 #: modules that add a subcommand: each defines ``register(subparsers)`` (add_parser + set_defaults(func=...))
-SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.ssp.cli")
+SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.studies.advise",
+                      "mechanism.ssp.cli")
 
 
 def main(argv: list[str] | None = None) -> int:
