@@ -2,9 +2,11 @@
 from __future__ import annotations
 
 import argparse
-from mechanism.studies.stepsize.cases import (ADAPTIVE, DEFAULT_STEPS, DEFAULT_TOLS, DIVERGENCE, MAX_STEPS_PER_CASE, ORDER_CEILING, ORDER_FLOOR, OUTPUT_INTERVAL, StudyConfig, parse_grid, parse_settings)
+import sys
+from collections import Counter
+from mechanism.studies.stepsize.cases import (ADAPTIVE, SKIPPED, STABLE, DEFAULT_STEPS, DEFAULT_TOLS, DIVERGENCE, MAX_STEPS_PER_CASE, ORDER_CEILING, ORDER_FLOOR, OUTPUT_INTERVAL, StudyConfig, parse_grid, parse_settings)
 from mechanism.studies.stepsize.runs import (replot, run_study)
-from mechanism.studies.stepsize.tables import (_fmt)
+from mechanism.studies.stepsize.tables import step_limit
 
 
 # ------------------------------------------------------------------------------------------ CLI
@@ -35,10 +37,16 @@ def cmd_stepsize(args) -> int:
     for g, info in result.summary["groups"].items():
         for scheme, e in info["schemes"].items():
             o = e["order"].get("order")
-            print(f"  {g} {scheme:15s} largest stable step {_fmt(e['largest_stable_step_s'])}, "
-                  f"within 1 %: {_fmt(e['largest_step_within_1pct_s'])}, order {o:.2f}" if o is not None else
-                  f"  {g} {scheme:15s} largest stable step {_fmt(e['largest_stable_step_s'])}, "
-                  f"within 1 %: {_fmt(e['largest_step_within_1pct_s'])}, order —")
+            print(f"  {g} {scheme:15s} largest stable step {step_limit(e, 'largest_stable_step_s')}, "
+                  f"peak error (peak joint force, max eccentricity) ≤ 1 % up to "
+                  f"{step_limit(e, 'largest_step_within_1pct_s')}, order {'—' if o is None else f'{o:.2f}'}")
+    failures = Counter((r["status"], (r.get("message") or "").split(":")[0][:80]) for r in result.rows
+                       if r["status"] != STABLE)
+    for (status, cause), n in failures.most_common():
+        print(f"  {n} case(s) {status}: {cause or 'no message'}")
+    if result.rows and all(r["status"] not in (STABLE, SKIPPED) for r in result.rows):
+        print(f"error: every case failed (first: {result.rows[0].get('message')})", file=sys.stderr)
+        return 1
     return 0
 
 
