@@ -1,4 +1,5 @@
-"""``python -m mechanism advise``: which coupling scheme and communication step meet a tolerance at one operating point.
+"""Which coupling scheme and communication step meet a tolerance at one operating point, and the
+largest stable step of every scheme (python -m mechanism advise).
 
   python -m mechanism advise --rpm 600 --balls 15 --set allow_ball_overlap=true --tolerance 1%
 
