@@ -12,7 +12,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from mechanism.studies.advise.runs import (MAX_STEP, MAX_STEPS, START_STEP, AdviceConfig, Refused, advise)
+from mechanism.studies.advise.runs import (MAX_STEP, MAX_STEPS, RESOLUTION, START_STEP, AdviceConfig, Refused,
+                                           advise)
 from mechanism.studies.advise.search import DEFAULT_MERIT, MERITS
 
 
@@ -36,6 +37,7 @@ def config_from_args(args) -> AdviceConfig:
                         merits=[m.strip() for m in args.merit.split(",") if m.strip()], schemes=schemes,
                         mode=args.mode, fmu=args.fmu, revs=args.revs, output_interval=args.output_interval,
                         start_step=args.start_step, max_step=args.max_step, max_steps=args.max_steps,
+                        resolution=args.resolution,
                         workers=args.workers, scheduler=args.scheduler, reference_cache=args.reference_cache,
                         out=args.out, plots=not args.no_plots, progress=not args.quiet)
 
@@ -91,6 +93,9 @@ def register(subparsers) -> None:
                    help=f"largest step searched [s] (default {MAX_STEP:g}); stable there is reported as a bound")
     p.add_argument("--max-steps", type=int, default=MAX_STEPS,
                    help=f"cost cap: no run with more communication steps (default {MAX_STEPS}); sets the smallest step")
+    p.add_argument("--resolution", type=float, default=RESOLUTION,
+                   help=f"neighbouring steps searched differ by at least this ratio (default {RESOLUTION:g}; "
+                        "1: every step on the output grid)")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: the core count)")
     p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                    help="run on this Dask distributed scheduler instead (needs the 'studies' extra)")

@@ -83,8 +83,12 @@ def table_text(advice: Advice) -> str:
 
 def timing_text(advice: Advice) -> str:
     ref = "from the cache" if advice.reference_cached else f"computed in {advice.reference_wall_s:.0f} s"
-    return (f"{advice.probes} runs on {advice.executor}; reference {ref}; total {advice.wall_time_s:.0f} s "
-            f"(wall times are this machine's, under its current load)")
+    rows = [r for search in advice.searches.values() for r in search.rows.values()]
+    busy = sum(r.get("wall_time") or 0.0 for r in rows)
+    steps = sum(r.get("steps") or 0 for r in rows)
+    return (f"{advice.probes} runs ({steps} communication steps, {busy:.0f} s summed over the runs) on "
+            f"{advice.executor}; reference {ref}; total {advice.wall_time_s:.0f} s wall "
+            f"(this machine's, under its current load)")
 
 
 def _window(c) -> str:

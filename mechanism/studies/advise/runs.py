@@ -17,6 +17,8 @@ from mechanism.studies.stepsize.runs import Executor, run_case
 #: the reference's rtol (the step-size study's) and the default search range
 REFERENCE_RTOL = 1e-11
 START_STEP, MAX_STEP, MAX_STEPS = 1e-4, 1e-3, 50_000
+#: neighbouring steps of the search differ by at least this ratio (the answer's resolution)
+RESOLUTION = 1.25
 
 
 class Refused(ValueError):
@@ -40,6 +42,7 @@ class AdviceConfig:
     start_step: float = START_STEP
     max_step: float = MAX_STEP
     max_steps: int = MAX_STEPS
+    resolution: float = RESOLUTION
     workers: int | None = None
     scheduler: str | None = None
     reference_cache: str = "results/references"
@@ -60,6 +63,8 @@ class AdviceConfig:
             raise ValueError(f"unknown figure(s) of merit {bad}; choose from {', '.join(MERITS)}")
         if not 0 < self.tolerance < 1:
             raise ValueError(f"tolerance {self.tolerance:g} must lie in (0, 1) (e.g. 1% or 0.01)")
+        if not self.resolution >= 1:
+            raise ValueError(f"--resolution {self.resolution:g} must be at least 1")
         if not (self.rpm > 0 and self.revs > 0 and self.max_steps > 0 and self.start_step > 0
                 and self.max_step >= self.output_interval):
             raise ValueError("rpm, revs, --start-step and --max-steps must be positive, "
@@ -79,7 +84,7 @@ class AdviceConfig:
 
     def ladder(self) -> list[float]:
         """The steps searched: on the output grid, from the cost cap (``max_steps`` per run) to ``max_step``."""
-        return ladder(self.output_interval, self.revs * self.period / self.max_steps, self.max_step)
+        return ladder(self.output_interval, self.revs * self.period / self.max_steps, self.max_step, self.resolution)
 
 
 def check_setup(config: AdviceConfig) -> None:

@@ -3,7 +3,7 @@ step and the largest step that meets the tolerance, both bracketed by a passing 
 
 The ladder is the set of steps the step-size study can compare on the reference's output grid
 (``stepsize.cases.snap_step``): dt/k below the output interval dt, dt*k above it, between the
-smallest step the cost cap allows and ``h_cap``. Both properties are assumed monotone in the step
+smallest step the cost cap allows and ``h_cap``, neighbours at least a ratio ``--resolution`` apart. Both properties are assumed monotone in the step
 (a step that passes makes every smaller step pass): the search brackets the limit by a passing and a
 failing rung and bisects the bracket (in log h) until the two rungs are neighbours on the ladder.
 A limit above the largest rung or below the smallest is reported as a bound ("≥" / "<"), never as a
@@ -27,14 +27,22 @@ MERITS: dict[str, tuple[str, str]] = {
 DEFAULT_MERIT = "peak-force"
 
 
-def ladder(dt: float, h_min: float, h_cap: float) -> list[float]:
-    """The comparable steps in [h_min, h_cap], ascending: dt/k (k >= 2) and dt*k (k >= 1)."""
-    steps = [dt * k for k in range(1, int(math.floor(h_cap / dt + 1e-9)) + 1)]
-    k = 2
-    while dt / k >= h_min * (1 - 1e-9):
-        steps.append(dt / k)
-        k += 1
-    return sorted(s for s in steps if h_min * (1 - 1e-9) <= s <= h_cap * (1 + 1e-9))
+def ladder(dt: float, h_min: float, h_cap: float, ratio: float = 1.0) -> list[float]:
+    """The comparable steps in [h_min, h_cap], ascending: dt/k below dt and dt*k above it, thinned so that
+    neighbours differ by at least ``ratio`` (1: every one); the largest comparable step <= h_cap is kept."""
+    def ks(limit: float) -> list[int]:
+        out, k = [], 1
+        while k <= limit * (1 + 1e-9):
+            out.append(k)
+            k = max(k + 1, math.ceil(k * ratio - 1e-9))
+        return out
+
+    up = [dt * k for k in ks(h_cap / dt)]
+    top = dt * math.floor(h_cap / dt + 1e-9)
+    if top >= dt and up and top > up[-1] * (1 + 1e-9):
+        up.append(top)
+    down = [dt / k for k in ks(dt / h_min) if k > 1]
+    return sorted(s for s in up + down if h_min * (1 - 1e-9) <= s <= h_cap * (1 + 1e-9))
 
 
 def merit_error(row: dict, merits: list[str]) -> float | None:
