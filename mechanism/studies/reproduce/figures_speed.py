@@ -20,8 +20,8 @@ STIFFNESS_BELIEF = ("ours: eq. (26) gives the Hertz constant in N/m^1.5 (SI); th
                     "constant used unchanged in a kg·mm·s code (K/1000, the paper-units variant of the stiffness "
                     "section), a units slip we do not reproduce")
 #: the 300 rpm pointwise caveat (docs/coupling.md)
-POINTWISE_300 = ("at 300 rpm our pointwise values carry the co-simulation's 21–36 % pointwise force error "
-                 "(docs/coupling.md); the trend decision does not hinge on them unless said")
+POINTWISE_300 = ("at 300 rpm our pointwise values carry the co-simulation's pointwise error of 21 % (joint "
+                 "force, slider acceleration) to 36 % (crank moment) (docs/coupling.md); the trend decision does not hinge on them unless said")
 
 
 class SpeedFigures:

@@ -31,8 +31,9 @@ CRITERIA = [
                       "result we trust and why."),
     ("Accuracy of our numbers", "co-simulation at h = 1e-5 s (jacobian-drift): second-revolution peaks within "
                                 "0.3 % of the monolithic reference at every speed (docs/stepsize-study.md); "
-                                "pointwise, the joint force is 21–36 % off at 300 rpm (contact-event timing, "
-                                "docs/coupling.md) and under 1 % at 1200 rpm. Pointwise measures at 300 rpm "
+                                "pointwise (largest difference over the revolution), 21 % (joint force, slider "
+                                "acceleration) to 36 % (crank moment) at 300 rpm (contact-event timing, "
+                                "docs/coupling.md), under 0.5 % at 600–1200 rpm. Pointwise measures at 300 rpm "
                                 "(RMS deviations, zero crossings) carry that uncertainty; peaks do not."),
 ]
 
