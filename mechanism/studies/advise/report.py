@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 from mechanism.studies.advise.runs import Advice
@@ -56,7 +57,7 @@ def one_line(advice: Advice) -> str:
                        f"{c.max_steps}); see the table")
     step = ("≥ " if a["bound"] else "") + _s(a["step_s"])
     stable = "; ".join(f"{s} {limit_text(advice, s, 'stable').split(' (')[0]}" for s in advice.searches)
-    return (head + f"use {a['scheme']} at h = {step} ({_pct(a['merit_error'])} off, {a['wall_time_s']:.2g} s wall "
+    return (head + f"use {a['scheme']} at h = {step} ({_pct(a['merit_error'])} off, {a['cpu_time_s']:.2g} s CPU "
             f"for {c.revs:g} revolutions); largest stable steps: {stable}")
 
 
@@ -66,13 +67,15 @@ def table_rows(advice: Advice) -> list[list[str]]:
         within = search.limit("within")
         row = within["row"] or {}
         rows.append([s, limit_text(advice, s, "stable"), limit_text(advice, s, "within"),
-                     _pct(row.get("merit_error")), "—" if row.get("wall_time") is None else f"{row['wall_time']:.2g} s",
+                     _pct(row.get("merit_error")),
+                     "—" if row.get("wall_time") is None else
+                     f"{row.get('cpu_time', math.nan):.2g} s ({row['wall_time']:.2g} s)",
                      str(len(search.rows)) + (" (non-monotone)" if search.non_monotone else "")])
     return rows
 
 
 HEADER = ["scheme", "largest stable step", "largest step within tolerance", "error there",
-          "wall time there", "runs"]
+          "CPU (wall) time there", "runs"]
 
 
 def table_text(advice: Advice) -> str:
@@ -85,8 +88,10 @@ def timing_text(advice: Advice) -> str:
     ref = "from the cache" if advice.reference_cached else f"computed in {advice.reference_wall_s:.0f} s"
     rows = [r for search in advice.searches.values() for r in search.rows.values()]
     busy = sum(r.get("wall_time") or 0.0 for r in rows)
+    cpu = sum(r.get("cpu_time") or 0.0 for r in rows)
     steps = sum(r.get("steps") or 0 for r in rows)
-    return (f"{advice.probes} runs ({steps} communication steps, {busy:.0f} s summed over the runs) on "
+    return (f"{advice.probes} runs ({steps} communication steps; summed over the runs {cpu:.0f} s CPU, "
+            f"{busy:.0f} s wall) on "
             f"{advice.executor}; reference {ref}; total {advice.wall_time_s:.0f} s wall "
             f"(this machine's, under its current load)")
 
@@ -108,8 +113,8 @@ def markdown(advice: Advice) -> str:
              "neighbours on the output grid (steps dt/k and dt·k, dt = "
              f"{c.output_interval:g} s); '≥' and '<' mark bounds at the ends of the range searched "
              f"({advice.ladder[0]:.3g} … {advice.ladder[-1]:.3g} s)",
-             "- the cheapest scheme is the one with the least measured wall time at its largest step within "
-             "the tolerance",
+             "- the cheapest scheme is the one whose run at its largest step within the tolerance took the least "
+             "CPU time (the wall time, also given, depends on the machine's load)",
              f"- reference floor (rtol 1e-11 against 1e-12, relative): " +
              (", ".join(f"{k} {_pct(v)}" for k, v in floor.items()) or "not measured"), "",
              "| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
@@ -167,7 +172,7 @@ def plot(advice: Advice, path: Path) -> Path:
         lim = search.limit("stable")
         if lim["fails_at"]:
             ax.axvline(lim["fails_at"], color=color, ls=":", lw=1)
-        walls = [(h, r["wall_time"]) for h, r in pts if r.get("wall_time")]
+        walls = [(h, r.get("cpu_time") or r["wall_time"]) for h, r in pts if r.get("wall_time")]
         if walls:
             bx.loglog(*zip(*walls), "o", color=color, ms=4, label=s)
     ax.axhline(advice.config.tolerance, color="k", ls="-.", lw=0.8)
@@ -177,7 +182,7 @@ def plot(advice: Advice, path: Path) -> Path:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     bx.set_xlabel("communication step h [s]")
-    bx.set_ylabel("wall time of the run [s]")
+    bx.set_ylabel("CPU time of the run [s]")
     bx.set_title(f"cost ({advice.executor}, shared machine)", fontsize=9)
     bx.grid(True, which="both", alpha=0.3)
     fig.suptitle(f"Step-size advice: {operating_point(advice)}, tolerance {100 * advice.config.tolerance:g} %",
