@@ -74,6 +74,7 @@ def cmd_run(args) -> int:
 
 #: modules that add a subcommand: each defines ``register(subparsers)`` (add_parser + set_defaults(func=...))
 SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.studies.advise",
+                      "mechanism.studies.life",
                       "mechanism.ssp.cli")
 
 
