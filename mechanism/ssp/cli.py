@@ -19,6 +19,7 @@ rpm and gravity -> the slider-crank, the BallBearing FMU from the archive), so t
 from __future__ import annotations
 
 import csv
+import os
 import sys
 from pathlib import Path
 
@@ -27,7 +28,7 @@ import numpy as np
 from mechanism import ssp as sm
 
 from mechanism.ssp.config import DEFAULT_ARCHIVE
-from mechanism.ssp.tools import RECORD, TOOLS, simulate_with
+from mechanism.ssp.tools import RECORD, TOOLS, ToolRunFailed, simulate_with
 
 
 def cmd_generate(args) -> int:
@@ -72,15 +73,16 @@ def cmd_simulate(args) -> int:
         name = system.check_parameter_set(args.parameter_set)
         rpm = float(system.parameters(name)[system.component_of_model("SliderCrank").name]["rpm"])
     t_end = args.t_end if args.t_end is not None else args.revs * 60.0 / rpm
-    result = simulate_with(args.tool, args.ssp, name, args.step, t_end)
     out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    keys = ["time", *RECORD]
-    with out.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(keys)
-        for row in zip(*(result[k] for k in keys)):
-            w.writerow([repr(float(v)) for v in row])
+    if out.is_dir():
+        raise ValueError(f"--out {out} is a folder, not a CSV file")
+    try:
+        result = simulate_with(args.tool, args.ssp, name, args.step, t_end)
+    except ToolRunFailed as err:   # a refused or diverged run: the rows before it, and a non-zero exit
+        _write_rows(out, err.result)
+        print(f"error: {err} ({len(err.result['time'])} steps up to then written to {out})", file=sys.stderr)
+        return 1
+    _write_rows(out, result)
     peak = float(np.max(np.hypot(result["bearing.F_x"], result["bearing.F_y"])))
     emax = float(np.max(np.hypot(result["mechanism.e_x"], result["mechanism.e_y"])))
     print(f"{args.tool}: {name}, {len(result['time'])} steps of {args.step:g} s to t = {t_end:.6g} s; "
@@ -88,26 +90,47 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def _write_rows(out: Path, result: dict) -> None:
+    """The recorded outputs as CSV (time and RECORD columns), written to a temporary name and renamed
+    when complete (``mechanism.output`` is above this package, so its ``atomic_open`` is not used here)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    keys = ["time", *RECORD]
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    try:
+        with tmp.open("w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(keys)
+            for row in zip(*(result[k] for k in keys)):
+                w.writerow([repr(float(v)) for v in row])
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
 def register(subparsers) -> None:
-    p = subparsers.add_parser("ssp-generate", help="write ssp/ (SSD and .ssv parameter sets) from the dataclass defaults")
+    text = "write ssp/ (SSD and .ssv parameter sets) from the dataclass defaults"
+    p = subparsers.add_parser("ssp-generate", help=text, description=text[0].upper() + text[1:] + ".")
     p.add_argument("--dest", default=str(sm.SOURCE_DIR), help="output folder (default: the project's ssp/)")
     p.add_argument("--check", action="store_true", help="only check that ssp/ matches the defaults (exit 1 if not)")
     p.set_defaults(func=cmd_generate)
 
-    p = subparsers.add_parser("ssp-pack", help=f"build the FMUs and pack {DEFAULT_ARCHIVE}")
+    text = f"build the FMUs and pack {DEFAULT_ARCHIVE} (SSD, .ssv parameter sets, FMUs)"
+    p = subparsers.add_parser("ssp-pack", help=text, description=text[0].upper() + text[1:] + ".")
     p.add_argument("--out", default=str(DEFAULT_ARCHIVE), help=f"archive to write (default {DEFAULT_ARCHIVE})")
     p.add_argument("--fmu-dir", default="dist", help="where the FMUs are built (default dist)")
     p.add_argument("--no-build", action="store_true", help="pack the FMUs already in --fmu-dir")
     p.add_argument("--max-balls", type=int, default=None, help="BallBearing per-ball output capacity")
     p.set_defaults(func=cmd_pack)
 
-    p = subparsers.add_parser("ssp-simulate", help="run the SSP in another FMI tool (fmpy.ssp, libcosim, ecos)")
-    p.add_argument("--tool", choices=TOOLS, default="fmpy")
+    text = "run the SSP in another FMI tool (fmpy.ssp, libcosim, ecos) and write a CSV"
+    p = subparsers.add_parser("ssp-simulate", help=text, description=text[0].upper() + text[1:] + ".")
+    p.add_argument("--tool", choices=TOOLS, default="fmpy",
+                   help="fmpy: fmpy.ssp; libcosim: libcosimpy; ecos: ecospy (fixed-step Jacobi masters; default fmpy)")
     p.add_argument("--ssp", default=str(DEFAULT_ARCHIVE), help=f"SSP archive (default {DEFAULT_ARCHIVE})")
     p.add_argument("--parameter-set", default=None, metavar="NAME",
                    help="named parameter set: the variant SSD NAME.ssd (default: the default SSD's set)")
     p.add_argument("--step", type=float, default=sm.DEFAULT_STEP, help="fixed communication step [s] (default 1e-5)")
     p.add_argument("--revs", type=float, default=0.2, help="crank revolutions (default 0.2)")
     p.add_argument("--t-end", type=float, default=None, help="end time [s] (instead of --revs)")
-    p.add_argument("--out", default="results/ssp/timeseries.csv", help="CSV to write")
+    p.add_argument("--out", default="results/ssp/timeseries.csv", help="CSV to write (default results/ssp/timeseries.csv)")
     p.set_defaults(func=cmd_simulate)
