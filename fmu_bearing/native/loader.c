@@ -597,12 +597,6 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type type, fmi
     remember(inst, 1);
     inst->inner = fmi.Instantiate(instanceName, type, guid, resourceLocation, &inst->callbacks, visible, loggingOn);
     if (inst->inner == NULL) {
-        if (!loggingOn)  /* pythonfmu says why only with logging on: say at least where it failed */
-            host_log(functions, functions ? functions->componentEnvironment : NULL, instanceName, fmi2Error,
-                     "logStatusError",
-                     "fmi2Instantiate: pythonfmu could not create the model's Python object (its Python code "
-                     "raised, e.g. a module the FMU imports is missing from the Python found); call "
-                     "fmi2Instantiate with loggingOn = fmi2True to see the Python error");
         remember(inst, 0);
         free(inst);
         return NULL;
