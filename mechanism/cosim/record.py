@@ -37,13 +37,17 @@ class Recorder:
         self.data = np.full((max(capacity, 1), len(self.columns)), np.nan)
         self.rows = 0
 
-    def add(self, values: dict[str, float]) -> None:
+    def next_row(self) -> np.ndarray:
+        """The next row (a view, NaN-filled) to write a sample into; the table doubles when full."""
         if self.rows == len(self.data):
             self.data = np.vstack([self.data, np.full_like(self.data, np.nan)])
-        row = self.data[self.rows]
+        self.rows += 1
+        return self.data[self.rows - 1]
+
+    def add(self, values: dict[str, float]) -> None:
+        row = self.next_row()
         for name, value in values.items():
             row[self.index[name]] = value
-        self.rows += 1
 
     def table(self) -> np.ndarray:
         return self.data[: self.rows]
