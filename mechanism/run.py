@@ -51,6 +51,7 @@ class RunConfig:
     method: str = "LSODA"
     rtol: float = 1e-9
     progress: bool = True
+    record_every: int | None = None      # record every N-th communication step (overrides output_interval)
 
     def __post_init__(self):
         if self.joint not in JOINTS:
@@ -59,6 +60,10 @@ class RunConfig:
             raise ValueError(f"mode must be one of {MODES}, not {self.mode!r}")
         if not (self.step > 0 and self.output_interval > 0 and self.revs > 0 and self.rpm > 0):
             raise ValueError("rpm, revs, step and output_interval must be positive")
+        if self.record_every is not None:
+            if int(self.record_every) != self.record_every or self.record_every < 1:
+                raise ValueError(f"record_every must be a positive integer, not {self.record_every!r}")
+            self.output_interval = self.record_every * self.step
 
     @property
     def crank_period(self) -> float:

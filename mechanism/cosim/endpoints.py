@@ -16,9 +16,12 @@ only at the output interval, because each value fetched through an FMU costs tim
 from __future__ import annotations
 
 import ctypes
+import math
 import shutil
 from pathlib import Path
 from typing import Mapping, Sequence
+
+import numpy as np
 
 from fmu_bearing.ball_bearing import BallBearing, BearingInputError
 from fmu_bearing.interface import COUPLING_OUTPUT_NAMES, JOINT_INPUT_NAMES
@@ -38,7 +41,7 @@ class InProcessEndpoint:
     kind = "in-process"
 
     def __init__(self, parameters: BearingParameters | Mapping[str, float] | None = None,
-                 capacity: int | None = None):
+                 capacity: int | None = None, compiled: bool = True):
         if parameters is None or isinstance(parameters, BearingParameters):
             params = parameters or BearingParameters()
         else:
@@ -52,6 +55,11 @@ class InProcessEndpoint:
         self._inputs = (0.0,) * 6
         self._cage = float(params.cage_angle_start)
         self._out: tuple = ()
+        self._law = None
+        if compiled:
+            from mechanism.cosim import law_kernel
+            self._law, self._law_evaluate = law_kernel.pack_bearing(self.bearing), law_kernel.evaluate
+            self._law_out, self._law_loads = np.zeros(10), np.zeros(self.n_balls)
 
     def initialize(self, inputs: Sequence[float]) -> tuple[float, ...]:
         """Set the start inputs and return the coupling outputs at the start time."""
@@ -62,10 +70,11 @@ class InProcessEndpoint:
     def exchange(self, t: float, h: float, inputs: Sequence[float]) -> tuple[float, ...]:
         """Set inputs, advance over [t, t + h] with them held, return the end-of-step coupling outputs."""
         ex, ey, vx, vy, wi, wo = inputs
-        try:
-            self.bearing.check_inputs(ex, ey, vx, vy, wi, wo)
-        except BearingInputError as err:
-            raise ExchangeError(str(err)) from None
+        if not (math.isfinite(ex + ey + vx + vy + wi + wo) and math.hypot(ex, ey) <= self.bearing.eccentricity_limit):
+            try:
+                self.bearing.check_inputs(ex, ey, vx, vy, wi, wo)
+            except BearingInputError as err:
+                raise ExchangeError(str(err)) from None
         self.calls += 1
         self._inputs = (ex, ey, vx, vy, wi, wo)
         self._cage = self.bearing.advance_cage(self._cage, wi, wo, h)
@@ -74,18 +83,28 @@ class InProcessEndpoint:
 
     def _evaluate(self) -> None:
         ex, ey, vx, vy, wi, wo = self._inputs
-        self._out = self.bearing.evaluate(ex, ey, vx, vy, self._cage, wi, wo, self._loads)
+        if self._law is None:
+            self._out = self.bearing.evaluate(ex, ey, vx, vy, self._cage, wi, wo, self._loads)
+        else:   # the compiled second implementation (mechanism.cosim.law_kernel, tested against evaluate)
+            self._law_evaluate(self._law, ex, ey, vx, vy, self._cage, wi, wo, self._law_out, self._law_loads)
+            self._out = tuple(self._law_out.tolist())
 
     def sample(self) -> list[float]:
         out = self._out
+        if self._law is not None:
+            return [self._cage, out[8], out[9], *self._law_loads.tolist()]
         return [self._cage, float(out.loaded_balls), out.max_ball_load, *self._loads]
 
     def get_state(self):
-        return (self._cage, self._inputs, self._out, list(self._loads))
+        loads = self._law_loads.copy() if self._law is not None else list(self._loads)
+        return (self._cage, self._inputs, self._out, loads)
 
     def set_state(self, state) -> None:
         self._cage, self._inputs, self._out, loads = state
-        self._loads[:] = loads
+        if self._law is not None:
+            self._law_loads[:] = loads
+        else:
+            self._loads[:] = loads
 
     def free_state(self, state) -> None:
         pass

@@ -163,24 +163,33 @@ class CouplingLoop:
         self._observe_in_kernel = hasattr(observe, "probes")
         if self._observe_in_kernel:
             probes += [(c, source[src], i, k) for c, src, i, k in observe.probes]
-        self._probe_cols = np.array([index[p[0]] for p in probes], np.int64)
-        self._probe_src = np.array([p[1] for p in probes], np.int64)
-        self._probe_idx = np.array([p[2] for p in probes], np.int64)
+        self._probes = np.array([(index[p[0]], p[1], p[2]) for p in probes], np.int64).reshape(-1, 3)
         self._probe_scale = np.array([p[3] for p in probes], np.float64)
         self._sample_cols = np.array([index[c] for c in self.sample_names], np.int64)
+        self._no_row = np.zeros(0)
 
-    def _finish_state(self, y: np.ndarray, t: float) -> None:
-        """dy/dt and lambda at the end state y (its kinematics in W) with the exchanged force."""
-        kn = self._kn
+    def _finish_state(self, y: np.ndarray, t: float, rec: Recorder | None = None) -> None:
+        """dy/dt and lambda at the end state y (its kinematics in W) with the exchanged force; with
+        ``rec`` also the sample (one evaluation for both; see ``record``)."""
         if self.link is not None:
             fx, fy = self.force
             ex, ey = self.inputs[0], self.inputs[1]
         else:
             fx = fy = ex = ey = 0.0
-        kn.finish(y, ex, ey, fx, fy, self._I, self._R, self._L, self._LR, self._W, self._dy)
-        if self.system.m:
-            kn.multipliers(self._I, self._W, self._lam)
+        row = self._no_row if rec is None else rec.next_row()
+        self._kn.finish(y, ex, ey, fx, fy, self._I, self._R, self._L, self._LR, self._W, self._u, self._dy,
+                        self._lam, row, self._probes, self._probe_scale, t, self._cv)
         self._end = (y, t)
+        if rec is None:
+            return
+        n = self.n
+        if self.link is None:
+            row[rec.index["F_x"]], row[rec.index["F_y"]] = self.reaction_force(y[:n], self._lam)
+        elif len(self._sample_cols):
+            row[self._sample_cols] = self.endpoint.sample()
+        if not self._observe_in_kernel:
+            for name, value in self.observe(y[:n], y[n:], self._dy[n:], self._lam, t).items():
+                row[rec.index[name]] = value
 
     def _k1_valid(self, y: np.ndarray, t0: float, fm: np.ndarray) -> bool:
         """True if the stored end-of-step evaluation is this step's first RK4 stage (same state, time
@@ -201,26 +210,24 @@ class CouplingLoop:
         """Initialise the component with the inputs of state y at t = 0 (no-op without a component)."""
         if self.kernels:
             self._kn.prepare(y, 0.0, self._I, self._R, self._L, self._LR, self._W, self._u)
-            self._cv = self._kn.max_violation(self._I, self._W)
+            self._cv = self._kn.max_violation(self._I, self._W) if self.system.m else 0.0
             self._end = (None, None)
         if self.endpoint is None:
-            if self.kernels:
-                self._finish_state(y, 0.0)
             return
         n, link = self.n, self.link
-        u = link.inputs(y[:n], y[n:])
+        u = tuple(self._u.tolist()) if self.kernels else link.inputs(y[:n], y[n:])
         out = self.endpoint.initialize(u)
         self.inputs, self.force = u, out[:2]
         self.scheme.push(Exchanged(0.0, *u[:4], *out))
         if self.scheme.uses_tangent:
             self.mobility = link.mobility(y[:n], 0.0)
-        if self.kernels:
-            self._finish_state(y, 0.0)
 
-    def advance(self, y: np.ndarray, t0: float, h: float, step: int, t: float | None = None) -> np.ndarray:
+    def advance(self, y: np.ndarray, t0: float, h: float, step: int, t: float | None = None,
+                rec: Recorder | None = None) -> np.ndarray:
         """One communication step [t0, t0 + h] from state y; returns the state at its end.
 
-        ``t`` is the end time (default t0 + h; the fixed-step loop passes step * h).
+        ``t`` is the end time (default t0 + h; the fixed-step loop passes step * h). With ``rec`` the
+        sample at the end of the step is appended to it (as ``record`` would, sharing its evaluation).
         Raises ``RunFailure`` (``step`` names it) or the component's error.
         """
         if t is None:
@@ -238,69 +245,59 @@ class CouplingLoop:
         else:
             m = 1
             fm = self._zero_fm if self.kernels else None
-        self.substeps_max = max(self.substeps_max, m)
+        if m > self.substeps_max:
+            self.substeps_max = m
         self.substeps_total += m
         hs = h / m
-        if fm is not None:     # the compiled step
-            kn = self._kn
-            y = kn.advance(y, t0, hs, m, t, fm, self._dy, self._k1_valid(y, t0, fm), self._I, self._R,
-                           self._L, self._LR, self._W, self._u)
-            drift = kn.max_violation(self._I, self._W)
-            finite = math.isfinite(float(y.sum()))
+        if fm is not None:     # the compiled step (kinematics of the end state included)
+            if self._end[0] is not y:
+                self._end = (None, None)
+            y, drift = self._kn.advance(y, t0, hs, m, t, fm, self._dy, self._k1_valid(y, t0, fm), self._I,
+                                        self._R, self._L, self._LR, self._W, self._u)
+            finite = math.isfinite(y.sum())
         else:                  # the NumPy reference (or a scheme without a force model)
             rhs = self.rhs
             for k in range(m):
                 y = rk4_step(rhs, t0 + k * hs, y, hs)
             finite = bool(np.all(np.isfinite(y)))
             drift = None
-            if self.kernels:   # keep the compiled end-of-step evaluation consistent
+            if self.kernels:   # the compiled end-of-step evaluation follows
                 self._kn.prepare(y, t, self._I, self._R, self._L, self._LR, self._W, self._u)
                 drift = self._kn.max_violation(self._I, self._W)
         if not finite:
             raise RunFailure(step, t, "the mechanism state is not finite (the integration diverged)")
         n = self.n
-        q, qd = y[:n], y[n:]
         if system.m:
             if drift is None:
-                drift = float(np.max(np.abs(system.phi(q, t))))
+                drift = float(np.max(np.abs(system.phi(y[:n], t))))
             self._cv = drift
             if drift > settings.max_constraint_violation:
                 raise RunFailure(step, t, f"constraint violation {drift:.3g} exceeds "
                                           f"{settings.max_constraint_violation:g} (the integration diverged)")
         if endpoint is not None:
-            u = tuple(self._u.tolist()) if self.kernels else self.link.inputs(q, qd)
+            u = tuple(self._u.tolist()) if self.kernels else self.link.inputs(y[:n], y[n:])
             if scheme.ordering == "jacobi":
                 out, used = pending, self.inputs
             else:
                 out, used = endpoint.exchange(t0, h, u), u
-            if not all(math.isfinite(x) for x in out):
+            if not math.isfinite(sum(out)):
                 raise RunFailure(step, t, f"the bearing returned a non-finite force {out[:2]}")
             scheme.push(Exchanged(t, *used[:4], *out))
             self.inputs, self.force = u, out[:2]
         if self.kernels:
-            self._finish_state(y, t)
+            self._finish_state(y, t, rec)
+        elif rec is not None:
+            rec.add(self.row(t, y))
         return y
 
     def record(self, rec: Recorder, t: float, y: np.ndarray) -> None:
-        """Append the sample at time t of the end-of-step state y to ``rec`` (see ``row``)."""
-        if not self.kernels or self._end[0] is not y or self._end[1] != t:
+        """Append the sample at time t of the state y (the last one ``start``/``advance`` reached) to ``rec``."""
+        if not self.kernels:
             rec.add(self.row(t, y))
             return
-        kn, n = self._kn, self.n
-        row = rec.next_row()
-        fx, fy = self.force if self.link is not None else (0.0, 0.0)
-        ke = kn.kinetic_energy(y[n:], self._I, self._R)
-        lam = self._lam
-        if self.link is None:
-            fx, fy = self.reaction_force(y[:n], lam)
-        kn.fill_row(row, self._probe_cols, self._probe_src, self._probe_idx, self._probe_scale, y, self._dy,
-                    lam, self._u, fx, fy, t, self._cv if self.system.m else 0.0, ke, n)
-        if not self._observe_in_kernel:
-            values = self.observe(y[:n], y[n:], self._dy[n:], lam, t)
-            for name, value in values.items():
-                row[rec.index[name]] = value
-        if self.link is not None and len(self._sample_cols):
-            row[self._sample_cols] = self.endpoint.sample()
+        if self._end[0] is not y or self._end[1] != t:
+            self._kn.prepare(y, t, self._I, self._R, self._L, self._LR, self._W, self._u)
+        self._finish_state(y, t, rec)
 
     def row(self, t: float, y: np.ndarray) -> dict:
         """The sample at time t for the end-of-step state y: observables, inputs, force, component samples
@@ -376,9 +373,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
         for step in range(1, n_steps + 1):
             t0 = (step - 1) * h
             t = step * h
-            y = loop.advance(y, t0, h, step, t)
-            if step % every == 0:
-                loop.record(rec, t, y)
+            y = loop.advance(y, t0, h, step, t, rec if step % every == 0 else None)
             if step % 500 == 0:
                 bar.update(500)
     except RunFailure as err:

@@ -76,3 +76,17 @@ class RunResult:
     @property
     def ok(self) -> bool:
         return self.status == "completed"
+
+
+def resample(result: RunResult, times: np.ndarray) -> RunResult:
+    """``result`` at other sample times, by a cubic spline through each column (times within its range;
+    ``meta["resampled_from_s"]`` keeps the original sampling interval)."""
+    from scipy.interpolate import CubicSpline
+    t = result["time"]
+    times = np.asarray(times, float)
+    times = times[times <= t[-1] * (1 + 1e-12)]
+    data = np.column_stack([times] + [CubicSpline(t, result.data[:, k])(times) if np.all(np.isfinite(result.data[:, k]))
+                                      else np.interp(times, t, result.data[:, k])
+                                      for k in range(1, len(result.columns))])
+    meta = dict(result.meta, resampled_from_s=float(t[1] - t[0]) if len(t) > 1 else 0.0)
+    return RunResult(result.columns, data, meta, result.status, result.message)

@@ -382,7 +382,8 @@ def rhs(tau, y, fm, I, R, L, LR, W, u, dy):
 
 @njit(cache=True)
 def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u):
-    """``substeps`` RK4 steps of size hs from (t0, y) under the force model fm; returns the new state.
+    """``substeps`` RK4 steps of size hs from (t0, y) under the force model fm; returns the new state
+    and its constraint violation max |Phi| (one kinematics evaluation per state).
 
     k1: dy/dt at (t0, y) if ``k1_valid`` (the end-of-step evaluation of the previous step, shared).
     On return W holds the kinematics of the end state at t_end (= t0 + substeps * hs, as the caller
@@ -417,7 +418,7 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u):
         for i in range(N):
             y[i] = y[i] + c * (kk[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
     prepare(y, t_end, I, R, L, LR, W, u)
-    return y
+    return y, max_violation(I, W)
 
 
 @njit(cache=True)
@@ -431,10 +432,12 @@ def prepare(y, t, I, R, L, LR, W, u):
 
 
 @njit(cache=True)
-def finish(y, ex, ey, fx, fy, I, R, L, LR, W, dy):
-    """dy/dt = [qd, qdd] at the end state y whose kinematics ``advance`` left in W, with the
-    exchanged force (fx, fy) at inputs e; lambda stays in W. This is the recorded sample and the
-    next step's first RK4 stage."""
+def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t, cv):
+    """dy/dt = [qd, qdd] and lambda (model order) at the end state y whose kinematics ``advance``
+    (or ``prepare``) left in W (and its bearing inputs in u), with the exchanged force (fx, fy) at
+    inputs e. This is the recorded
+    sample and the next step's first RK4 stage. If ``row`` is not empty the sample's probes are
+    written into it (``fill_row``)."""
     n = I[1]
     q, qd = y[:n], y[n:]
     Q = _slices(I, W)[7]
@@ -443,15 +446,18 @@ def finish(y, ex, ey, fx, fy, I, R, L, LR, W, dy):
         add_link_force(Q, q, I[0], L, LR, ex, ey, fx, fy)
     dy[:n] = qd
     solve(qd, Q, I, R, W, dy[n:])
+    multipliers(I, W, lam)
+    if row.shape[0] > 0:
+        fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, kinetic_energy(qd, I, R), n)
 
 
 @njit(cache=True)
-def fill_row(row, cols, src, index, scale, y, dy, lam, u, fx, fy, t, cv, ke, n):
-    """Write the probes of a sample into row: row[cols[k]] = scale[k] * source[index[k]], sources
-    0 q, 1 qd, 2 qdd, 3 lambda (model order), 4 bearing inputs u, 5 force (index 0 x, 1 y), 6 time,
-    7 max |Phi| (cv), 8 kinetic energy (ke)."""
-    for k in range(cols.shape[0]):
-        s, i = src[k], index[k]
+def fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, ke, n):
+    """Write the probes of a sample: row[probes[k, 0]] = scale[k] * source[probes[k, 2]] with source
+    probes[k, 1]: 0 q, 1 qd, 2 qdd, 3 lambda (model order), 4 bearing inputs of y, 5 force (index 0 x,
+    1 y), 6 time, 7 max |Phi| (cv), 8 kinetic energy (ke)."""
+    for k in range(probes.shape[0]):
+        c, s, i = probes[k, 0], probes[k, 1], probes[k, 2]
         if s == 0:
             v = y[i]
         elif s == 1:
@@ -470,7 +476,7 @@ def fill_row(row, cols, src, index, scale, y, dy, lam, u, fx, fy, t, cv, ke, n):
             v = cv
         else:
             v = ke
-        row[cols[k]] = scale[k] * v
+        row[c] = scale[k] * v
 
 
 @njit(cache=True)
