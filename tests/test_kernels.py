@@ -197,3 +197,69 @@ def test_compiled_force_law_matches_ball_bearing(settings):
         assert np.allclose(loads, ref_loads, rtol=1e-12, atol=1e-12 * scale_f)
         loaded += ref.loaded_balls > 0
     assert loaded > 50           # the draws reach the load zone
+
+
+# ------------------------------------------------------------------------------ the master on the kernels
+from mechanism.cosim.adaptive import AdaptiveSettings, run_adaptive  # noqa: E402
+from mechanism.cosim.endpoints import InProcessEndpoint  # noqa: E402
+from mechanism.cosim.master import MasterSettings, run_master  # noqa: E402
+from mechanism.cosim.record import resample  # noqa: E402
+
+
+def _slider_crank_run(scheme: str | None, kernels: bool, t_end: float = 0.0015, step: float = 1e-5):
+    p = slider_crank.SliderCrankParameters()
+    system = System(slider_crank.build(p, "ideal" if scheme is None else "bearing"))
+    q0, qd0 = slider_crank.initial_state(system, p)
+    settings = MasterSettings(t_end=t_end, step=step, output_interval=step, scheme=scheme or "zoh", progress=False,
+                              kernels=kernels)
+    observe = slider_crank.slider_crank_observer(system)
+    if scheme is None:
+        return run_master(system, q0, qd0, settings, observe, reaction_force=slider_crank.ideal_reaction(system))
+    link = BearingLink(system, system.model.bearings[0])
+    # the reference: the NumPy solver and the force law of fmu_bearing; the compiled run: kernels and law_kernel
+    return run_master(system, q0, qd0, settings, observe, link, InProcessEndpoint(compiled=kernels))
+
+
+@pytest.mark.parametrize("scheme", [None, *sorted(SCHEMES)])
+def test_master_on_kernels_reproduces_the_numpy_master(scheme):
+    """Same scheme, same step: the compiled master (kernels, compiled law, shared end-of-step evaluation,
+    preallocated recording) gives the reference master's samples to 1e-9 relative per column."""
+    ref = _slider_crank_run(scheme, kernels=False)
+    got = _slider_crank_run(scheme, kernels=True)
+    # (zoh-jacobi diverges at this step: both must stop at the same step with the same cause)
+    assert (got.status, got.message) == (ref.status, ref.message)
+    assert ref.columns == got.columns and ref.data.shape == got.data.shape and len(ref.data) > 50
+    for k, column in enumerate(ref.columns):
+        a, b = got.data[:, k], ref.data[:, k]
+        assert np.array_equal(np.isnan(a), np.isnan(b)), column
+        scale = np.nanmax(np.abs(b)) if np.isfinite(b).any() else 0.0
+        tol = 1e-9 * scale + (1e-15 if column == "constraint_violation" else 0.0)
+        assert np.nanmax(np.abs(a - b), initial=0.0) <= tol, column
+    assert got.meta["substeps_total"] == ref.meta["substeps_total"]
+
+
+def test_adaptive_driver_on_kernels_reproduces_the_numpy_master():
+    """The adaptive scheme with rollback (snapshot/restore) on the kernels: same accepted steps and samples."""
+    results = []
+    for kernels in (False, True):
+        p = slider_crank.SliderCrankParameters()
+        system = System(slider_crank.build(p, "bearing"))
+        q0, qd0 = slider_crank.initial_state(system, p)
+        settings = AdaptiveSettings(t_end=0.001, output_interval=1e-4, tol=1e-3, step=1e-6, progress=False,
+                                    kernels=kernels)
+        results.append(run_adaptive(system, q0, qd0, settings, slider_crank.slider_crank_observer(system),
+                                    BearingLink(system, system.model.bearings[0]), InProcessEndpoint(compiled=kernels)))
+    ref, got = results
+    assert ref.ok and got.ok
+    assert got.meta["accepted_steps"] == ref.meta["accepted_steps"] and got.meta["rejected_steps"] == ref.meta["rejected_steps"]
+    k = ref.columns.index("F_x")
+    assert np.allclose(got.data[:, k], ref.data[:, k], rtol=0, atol=1e-9 * np.max(np.abs(ref.data[:, k])))
+
+
+def test_ideal_counterpart_at_the_coarse_step_resamples_to_1e_9():
+    """``run``'s ideal counterpart at 1e-4 s, resampled by cubic splines, against RK4 at 1e-5 s."""
+    fine = _slider_crank_run(None, kernels=True, t_end=0.02, step=1e-5)
+    coarse = resample(_slider_crank_run(None, kernels=True, t_end=0.02, step=1e-4), fine["time"])
+    for column in ("slider_x", "slider_v", "slider_a", "crank_moment", "F_x", "F_y"):
+        err = np.max(np.abs(coarse[column] - fine[column])) / np.max(np.abs(fine[column]))
+        assert err < 1e-6, (column, err)
