@@ -166,6 +166,8 @@ class CouplingLoop:
         self._probe_scale = np.array([p[3] for p in probes], np.float64)
         self._sample_cols = np.array([index[c] for c in self.sample_names], np.int64)
         self._no_row = np.zeros(0)
+        probe = getattr(self.reaction_force, "probe", None)   # (joint rows start, stop, x column, y column)
+        self._react = np.array(probe if probe is not None and self.link is None else (), np.int64)
 
     def _finish_state(self, y: np.ndarray, t: float, rec: Recorder | None = None) -> None:
         """dy/dt and lambda at the end state y (its kinematics in W) with the exchanged force; with
@@ -177,13 +179,14 @@ class CouplingLoop:
             fx = fy = ex = ey = 0.0
         row = self._no_row if rec is None else rec.next_row()
         self._kn.finish(y, ex, ey, fx, fy, self._I, self._R, self._L, self._LR, self._W, self._u, self._dy,
-                        self._lam, row, self._probes, self._probe_scale, t, self._cv)
+                        self._lam, row, self._probes, self._probe_scale, t, self._cv, self._react)
         self._end = (y, t)
         if rec is None:
             return
         n = self.n
         if self.link is None:
-            row[rec.index["F_x"]], row[rec.index["F_y"]] = self.reaction_force(y[:n], self._lam)
+            if not len(self._react):
+                row[rec.index["F_x"]], row[rec.index["F_y"]] = self.reaction_force(y[:n], self._lam)
         elif len(self._sample_cols):
             row[self._sample_cols] = self.endpoint.sample()
         if not self._observe_in_kernel:
@@ -251,9 +254,8 @@ class CouplingLoop:
         if fm is not None:     # the compiled step (kinematics of the end state included)
             if self._end[0] is not y:
                 self._end = (None, None)
-            y, drift = self._kn.advance(y, t0, hs, m, t, fm, self._dy, self._k1_valid(y, t0, fm), self._I,
-                                        self._R, self._L, self._LR, self._W, self._u)
-            finite = math.isfinite(y.sum())
+            y, drift, finite = self._kn.advance(y, t0, hs, m, t, fm, self._dy, self._k1_valid(y, t0, fm), self._I,
+                                                self._R, self._L, self._LR, self._W, self._u)
         else:                  # the NumPy reference (or a scheme without a force model)
             rhs = self.rhs
             for k in range(m):
@@ -394,4 +396,4 @@ def finish(rec: Recorder, info: dict, status: str, message: str, endpoint, bar, 
     info["substeps_total"] = loop.substeps_total
     if endpoint is not None:
         info["component_calls"] = endpoint.calls
-    return RunResult(rec.columns, rec.table().copy(), info, status, message)
+    return RunResult(rec.columns, rec.table(), info, status, message)

@@ -50,7 +50,11 @@ class Recorder:
             row[self.index[name]] = value
 
     def table(self) -> np.ndarray:
-        return self.data[: self.rows]
+        """The recorded rows (a view while the capacity is used up to one spare row, else a copy, so that
+        a table preallocated for a run that stopped early does not stay in memory)."""
+        if self.rows + 1 >= len(self.data):
+            return self.data[: self.rows]
+        return self.data[: self.rows].copy()
 
 
 @dataclass

@@ -383,7 +383,7 @@ def rhs(tau, y, fm, I, R, L, LR, W, u, dy):
 @njit(cache=True)
 def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u):
     """``substeps`` RK4 steps of size hs from (t0, y) under the force model fm; returns the new state
-    and its constraint violation max |Phi| (one kinematics evaluation per state).
+    its constraint violation max |Phi| (one kinematics evaluation per state) and whether it is finite.
 
     k1: dy/dt at (t0, y) if ``k1_valid`` (the end-of-step evaluation of the previous step, shared).
     On return W holds the kinematics of the end state at t_end (= t0 + substeps * hs, as the caller
@@ -417,8 +417,15 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u):
         c = hs / 6.0
         for i in range(N):
             y[i] = y[i] + c * (kk[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
-    prepare(y, t_end, I, R, L, LR, W, u)
-    return y, max_violation(I, W)
+    finite = True
+    for i in range(N):
+        if not math.isfinite(y[i]):
+            finite = False
+            break
+    if finite:
+        prepare(y, t_end, I, R, L, LR, W, u)
+        return y, max_violation(I, W), True
+    return y, math.nan, False
 
 
 @njit(cache=True)
@@ -432,12 +439,14 @@ def prepare(y, t, I, R, L, LR, W, u):
 
 
 @njit(cache=True)
-def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t, cv):
+def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t, cv, react):
     """dy/dt = [qd, qdd] and lambda (model order) at the end state y whose kinematics ``advance``
     (or ``prepare``) left in W (and its bearing inputs in u), with the exchanged force (fx, fy) at
     inputs e. This is the recorded
     sample and the next step's first RK4 stage. If ``row`` is not empty the sample's probes are
-    written into it (``fill_row``)."""
+    written into it (``fill_row``); with ``react`` = [first row, end row, x column, y column] of a
+    kinematic joint (model order) and no force joint, the force written is that joint's reaction
+    Q^C = -Phi_q^T lambda (eq. 7) on those coordinates (the ideal joint's force on the housing body)."""
     n = I[1]
     q, qd = y[:n], y[n:]
     Q = _slices(I, W)[7]
@@ -447,6 +456,14 @@ def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t,
     dy[:n] = qd
     solve(qd, Q, I, R, W, dy[n:])
     multipliers(I, W, lam)
+    if row.shape[0] > 0 and L[0] == 0 and react.shape[0] == 4:
+        m, K, A = I[2], I[3], I[4]
+        to_model = I[H_I + 3 * K + 2 * A:H_I + 3 * K + 2 * A + m]
+        J = _slices(I, W)[0]
+        fx = fy = 0.0
+        for r in range(react[0], react[1]):
+            fx -= J[to_model[r], react[2]] * lam[r]
+            fy -= J[to_model[r], react[3]] * lam[r]
     if row.shape[0] > 0:
         fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, kinetic_energy(qd, I, R), n)
 

@@ -131,4 +131,6 @@ def ideal_reaction(system: System):
     def reaction(q, lam):
         Qc = system.reactions(q, lam)["crank_rod"]
         return float(Qc[crank.start]), float(Qc[crank.start + 1])
+    rows = system.rows("crank_rod")
+    reaction.probe = (rows.start, rows.stop, crank.start, crank.start + 1)   # the same, for the compiled recorder
     return reaction
