@@ -188,14 +188,27 @@ def kinematics(q, qd, t, I, R, J, phi, gam, phit):
 
 @njit(cache=True)
 def _cholesky_solve(S, b):
-    """Solve S x = b in place in b (S symmetric positive definite, overwritten); False if not SPD."""
+    """Solve S x = b in place in b (S symmetric positive semidefinite, overwritten by its factor).
+
+    A pivot below 1e-12 of the largest diagonal entry (a redundant constraint) is dropped: that
+    unknown is set to 0, which solves a consistent redundant system (a basic, not the minimum-norm,
+    solution; the accelerations M^-1 (Q - Phi_q^T lam) are the same). Returns the number of
+    dropped pivots."""
     m = S.shape[0]
+    big = 0.0
+    for j in range(m):
+        big = max(big, abs(S[j, j]))
+    tol = 1e-12 * big
+    dropped = 0
     for j in range(m):
         d = S[j, j]
         for k in range(j):
             d -= S[j, k] * S[j, k]
-        if not d > 0.0:
-            return False
+        if not d > tol:
+            dropped += 1
+            for i in range(j, m):
+                S[i, j] = 0.0
+            continue
         d = math.sqrt(d)
         S[j, j] = d
         for i in range(j + 1, m):
@@ -204,16 +217,22 @@ def _cholesky_solve(S, b):
                 s -= S[i, k] * S[j, k]
             S[i, j] = s / d
     for i in range(m):
+        if S[i, i] == 0.0:
+            b[i] = 0.0
+            continue
         s = b[i]
         for k in range(i):
             s -= S[i, k] * b[k]
         b[i] = s / S[i, i]
     for i in range(m - 1, -1, -1):
+        if S[i, i] == 0.0:
+            b[i] = 0.0
+            continue
         s = b[i]
         for k in range(i + 1, m):
             s -= S[k, i] * b[k]
         b[i] = s / S[i, i]
-    return True
+    return dropped
 
 
 @njit(cache=True)
@@ -242,14 +261,8 @@ def solve(qd, Q, I, R, W, qdd):
             S[c, r] = v
     for r in range(m):
         lam[r] = rhs[r]
-    if m > 0 and not _cholesky_solve(S, lam):          # redundant constraints: least squares
-        for r in range(m):
-            for c in range(m):
-                v = 0.0
-                for i in range(n):
-                    v += J[r, i] * minv[i] * J[c, i]
-                S[r, c] = v
-        lam[:] = np.linalg.lstsq(S, rhs)[0]
+    if m > 0:
+        _cholesky_solve(S, lam)                            # redundant rows dropped (see there)
     for i in range(n):
         v = tmp[i]
         for r in range(m):
