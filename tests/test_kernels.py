@@ -263,3 +263,22 @@ def test_ideal_counterpart_at_the_coarse_step_resamples_to_1e_9():
     for column in ("slider_x", "slider_v", "slider_a", "crank_moment", "F_x", "F_y"):
         err = np.max(np.abs(coarse[column] - fine[column])) / np.max(np.abs(fine[column]))
         assert err < 1e-6, (column, err)
+
+
+def test_kernel_redundant_constraints_give_the_numpy_accelerations():
+    """A repeated joint makes Phi_q rank-deficient: the kernel drops the redundant rows (a basic solution for
+    lambda), the NumPy reference takes the minimum-norm one; the accelerations are the same."""
+    p = double_pendulum.DoublePendulumParameters()
+    base = double_pendulum.build(p)
+    pivot = base.joints[0]
+    model = Model(bodies=base.bodies, joints=(*base.joints, Revolute("pivot_again", pivot.i, pivot.j)),
+                  gravity=base.gravity)
+    system = System(model)
+    q, qd = double_pendulum.initial_state(System(base), p)
+    qd = System(base).velocities(q, 0.0, np.array([0.0, 0.0, 1.0, 0.0, 0.0, -2.0]))
+    Q = np.array([1.0, -2.0, 0.1, 0.5, 0.3, -0.05])
+    ref_qdd, ref_lam = system.accelerations(q, qd, 0.0, Q)
+    qdd, lam = CompiledSystem(system).accelerations(q, qd, 0.0, Q)
+    assert _rel(qdd, ref_qdd) <= 1e-10
+    J = system.jacobian(q)
+    assert np.allclose(J.T @ lam, J.T @ ref_lam, rtol=1e-10, atol=1e-10 * np.max(np.abs(J.T @ ref_lam)))
