@@ -165,6 +165,8 @@ class CouplingLoop:
         self._probes = np.array([(index[p[0]], p[1], p[2]) for p in probes], np.int64).reshape(-1, 3)
         self._probe_scale = np.array([p[3] for p in probes], np.float64)
         self._sample_cols = np.array([index[c] for c in self.sample_names], np.int64)
+        if len(self._sample_cols) and np.array_equal(np.diff(self._sample_cols), np.ones(len(self._sample_cols) - 1)):
+            self._sample_cols = slice(int(self._sample_cols[0]), int(self._sample_cols[-1]) + 1)   # a faster write
         self._no_row = np.zeros(0)
         probe = getattr(self.reaction_force, "probe", None)   # (joint rows start, stop, x column, y column)
         self._react = np.array(probe if probe is not None and self.link is None else (), np.int64)
@@ -187,7 +189,7 @@ class CouplingLoop:
         if self.link is None:
             if not len(self._react):
                 row[rec.index["F_x"]], row[rec.index["F_y"]] = self.reaction_force(y[:n], self._lam)
-        elif len(self._sample_cols):
+        elif self.sample_names:
             row[self._sample_cols] = self.endpoint.sample()
         if not self._observe_in_kernel:
             for name, value in self.observe(y[:n], y[n:], self._dy[n:], self._lam, t).items():

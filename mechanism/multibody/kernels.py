@@ -98,6 +98,17 @@ def _slices(I, W):
 
 
 @njit(cache=True)
+def _body_point(q, qd, nb, b, sx, sy):
+    """(omega, u_x, u_y, x, y, xd, yd): u = A s' of a point on body b (eq. 10) and the body's state;
+    ground (b = nb): u = s', the rest 0."""
+    if b >= nb:
+        return 0.0, sx, sy, 0.0, 0.0, 0.0, 0.0
+    th = q[3 * b + 2]
+    c, s = math.cos(th), math.sin(th)
+    return qd[3 * b + 2], c * sx - s * sy, s * sx + c * sy, q[3 * b], q[3 * b + 1], qd[3 * b], qd[3 * b + 1]
+
+
+@njit(cache=True)
 def kinematics(q, qd, t, I, R, J, phi, gam, phit):
     """Phi (eq. 3), Phi_q, gamma (eq. 5) and Phi_t (eq. 4) in internal row order, written in place."""
     nb, n, m, K, A = I[0], I[1], I[2], I[3], I[4]
@@ -116,25 +127,9 @@ def kinematics(q, qd, t, I, R, J, phi, gam, phit):
     J[:, :] = 0.0
     for k in range(K):
         j, i, r = bJ[k], bI[k], bref[k]
-        # body J point: u = A s' (eq. 10), position, velocity
-        if j < nb:
-            thj, wj = q[3 * j + 2], qd[3 * j + 2]
-            cj, sj = math.cos(thj), math.sin(thj)
-            ujx, ujy = cj * sJx[k] - sj * sJy[k], sj * sJx[k] + cj * sJy[k]
-            zjx, zjy, zdjx, zdjy = q[3 * j], q[3 * j + 1], qd[3 * j], qd[3 * j + 1]
-        else:
-            wj = 0.0
-            ujx, ujy = sJx[k], sJy[k]
-            zjx = zjy = zdjx = zdjy = 0.0
-        if i < nb:
-            thi, wi = q[3 * i + 2], qd[3 * i + 2]
-            ci, si = math.cos(thi), math.sin(thi)
-            uix, uiy = ci * sIx[k] - si * sIy[k], si * sIx[k] + ci * sIy[k]
-            zix, ziy, zdix, zdiy = q[3 * i], q[3 * i + 1], qd[3 * i], qd[3 * i + 1]
-        else:
-            wi = 0.0
-            uix, uiy = sIx[k], sIy[k]
-            zix = ziy = zdix = zdiy = 0.0
+        # u = A s' (eq. 10) of each point, its body's position, velocity and angular velocity
+        wj, ujx, ujy, zjx, zjy, zdjx, zdjy = _body_point(q, qd, nb, j, sJx[k], sJy[k])
+        wi, uix, uiy, zix, ziy, zdix, zdiy = _body_point(q, qd, nb, i, sIx[k], sIy[k])
         dx = (zjx - zix) + (ujx - uix)                     # d = r_J^P - r_I^P
         dy = (zjy - ziy) + (ujy - uiy)
         wujx, wujy = wj * ujx, wj * ujy
@@ -304,13 +299,8 @@ def max_violation(I, W):
 @njit(cache=True)
 def _point(q, qd, nb, b, sx, sy):
     """(x, y, xd, yd) of a point s' on body b (eq. 10-12); ground: (s', 0)."""
-    if b >= nb:
-        return sx, sy, 0.0, 0.0
-    th = q[3 * b + 2]
-    c, s = math.cos(th), math.sin(th)
-    ux, uy = c * sx - s * sy, s * sx + c * sy
-    w = qd[3 * b + 2]
-    return q[3 * b] + ux, q[3 * b + 1] + uy, qd[3 * b] - w * uy, qd[3 * b + 1] + w * ux
+    w, ux, uy, x, y, xd, yd = _body_point(q, qd, nb, b, sx, sy)
+    return x + ux, y + uy, xd - w * uy, yd + w * ux
 
 
 @njit(cache=True)
