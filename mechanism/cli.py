@@ -95,7 +95,8 @@ def ideal_counterpart(config: "RunConfig", result):
 
 
 #: modules that add a subcommand: each defines ``register(subparsers)`` (add_parser + set_defaults(func=...))
-SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.ssp.cli")
+SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.studies.life",
+                      "mechanism.ssp.cli")
 
 
 def main(argv: list[str] | None = None) -> int:

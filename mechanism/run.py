@@ -18,7 +18,7 @@ from fmu_bearing.parameters import from_values as bearing_parameters
 from mechanism.cosim.adaptive import AdaptiveSettings
 from mechanism.cosim.adaptive import run_adaptive as run_adaptive_master
 from mechanism.cosim.coupling import DEFAULT_SCHEME
-from mechanism.cosim.endpoints import FmuEndpoint, InProcessEndpoint
+from mechanism.cosim.endpoints import InProcessEndpoint, fmu_endpoint
 from mechanism.cosim.joint import BearingLink
 from mechanism.cosim.master import MasterSettings, run_master
 from mechanism.cosim.monolithic import run_monolithic
@@ -149,7 +149,7 @@ def run(config: RunConfig) -> RunResult:
         meta["contact_stiffness_N_m1.5"] = endpoint.bearing.stiffness
     else:
         path = fmu_path(config)
-        endpoint = FmuEndpoint(path, config.component_settings, instance_name=config.joint)
+        endpoint = fmu_endpoint(path, config.component_settings, instance_name=config.joint)  # FMI 2 or 3
         meta["fmu"] = str(path)
     try:
         return run_master(system, q0, qd0, settings, observe, link=link, endpoint=endpoint, meta=meta)
@@ -179,7 +179,7 @@ def run_adaptive(config, tol: float, initial_step: float | None = None, **settin
         endpoint = InProcessEndpoint(bearing_parameters(config.component_settings))
     else:
         path = fmu_path(config)
-        endpoint = FmuEndpoint(path, config.component_settings, instance_name=config.joint)
+        endpoint = fmu_endpoint(path, config.component_settings, instance_name=config.joint)  # FMI 2 or 3
         meta["fmu"] = str(path)
     start = time.perf_counter()
     try:

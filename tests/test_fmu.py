@@ -2,7 +2,6 @@
 force law, FMU state, several instances, capacities, and the error paths (status and logger message)."""
 from __future__ import annotations
 
-import ctypes
 import json
 import math
 import os
@@ -17,9 +16,8 @@ import numpy as np
 import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, free)
-from fmpy.logging import addLoggerProxy
+from fmpy.fmi2 import (FMU2Slave)
+from mechanism.cosim.fmpy_logging import fmpy_callbacks
 from fmpy.validation import validate_fmu
 
 from fmu_bearing.ball_bearing import BallBearing
@@ -58,11 +56,7 @@ class Instance:
     def __init__(self, fmu: FMU, name="bearing", params=None, inputs=None, logging_on=True, initialise=True):
         self.fmu, self.messages = fmu, []
         self.params = dict(params or {})
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        addLoggerProxy(ctypes.byref(self.callbacks))  # formats the variadic message
+        self.callbacks = fmpy_callbacks(self._log)  # fmpy's proxy formats the message; never dangles
         self.s = FMU2Slave(guid=fmu.md.guid, unzipDirectory=fmu.dir,
                            modelIdentifier=fmu.md.coSimulation.modelIdentifier, instanceName=name)
         self.s.instantiate(callbacks=self.callbacks, loggingOn=logging_on)
@@ -386,7 +380,7 @@ def test_eccentricity_beyond_the_limit_is_an_error(fmu, params, e_x):
 
 
 INVALID = [("n_balls", 2), ("n_balls", 21), ("poisson_ratio", 0.7), ("youngs_modulus", -1e9),
-           ("radial_clearance", -1e-6), ("inner_groove_conformity", 0.5), ("damping_coefficient", -5.0),
+           ("radial_clearance", -1e-4), ("reliability_factor", 2.0), ("inner_groove_conformity", 0.5), ("damping_coefficient", -5.0),
            ("inner_race_diameter", 0.03), ("n_balls", 14)]
 
 

@@ -19,7 +19,6 @@ This file is the FMU's slave module: pythonfmu's binary imports it as a top-leve
 the slave class by matching its source lines against a class statement deriving from Fmi2Slave, so
 it uses absolute imports only and no ``from __future__`` import.
 """
-import math
 from dataclasses import fields
 from functools import partial
 
@@ -28,10 +27,12 @@ from pythonfmu import (Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, F
 from pythonfmu.enums import Fmi2Status
 
 from fmu_bearing import ball_bearing as physics
+from fmu_bearing import life
 from fmu_bearing.parameters import BearingParameters
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
 from fmu_bearing.slaves import (HostLogger, add_initial_unknowns, add_unit_definitions, guard_pythonfmu_exit,
                                 hold_before_raise, read_build_options, release_on_free, weak_accessors)
+from fmu_bearing.slaves.stepping import BearingStepping
 
 #: per-ball outputs when the FMU was built without an explicit --max-balls
 DEFAULT_CAPACITY = 20
@@ -51,6 +52,11 @@ _INPUT_VRS = list(range(len(INPUTS)))
 
 CAGE_ANGLE = ("cage_angle", "rad",
               "angle of ball 1 (ball r at cage_angle + 2 pi (r-1)/n_balls), time integral of the cage speed (eq. 16)")
+
+#: load ratings and life outputs (name, unit, description, source): one home in fmu_bearing.life
+RATING_OUTPUTS, LIFE_OUTPUTS = life.RATING_OUTPUTS, life.LIFE_OUTPUTS
+#: key of the life accumulator's sums in the FMU state
+_LIFE_STATE = "__life_accumulator__"
 
 #: Integer parameters: (min, max); max None = the FMU's per-ball capacity
 _INTEGER_RANGES = {"n_balls": (3, None), "damping_model": (0, 2)}
@@ -86,11 +92,20 @@ class BooleanVariable(_TypeAttributes, Boolean):
     pass
 
 
+def _ignore(value):
+    """Setter of a read-only computed output (the FMU state restores its source instead)."""
+
+
+def _life_output(slave, prop):
+    """A life output (LIFE_OUTPUTS) of the slave's accumulator; before initialisation, of an empty one."""
+    return float(getattr(slave._life if slave._life is not None else slave._empty_life, prop))
+
+
 #: key of the state returned for bytes that are not a serialized state (no exception may escape)
 _INVALID_STATE = "__invalid_state__"
 
 
-class BallBearing(Fmi2Slave):
+class BallBearing(Fmi2Slave, BearingStepping):
     author = "bearing-cosim contributors"
     description = ("Deep-groove ball bearing with radial clearance (Xu et al., Mech. Mach. Theory 56, 2012): "
                    "force on the housing from the journal eccentricity, per-ball Hertz contact with damping")
@@ -100,11 +115,13 @@ class BallBearing(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name)  # errors even with logging off
+        # errors reach the host even with logging off
+        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name, kwargs.get("resources"))
         guard_pythonfmu_exit(self.resources)
         release_on_free(self)                      # the last fmi2FreeInstance undoes the FMU's imports
         self.capacity = read_capacity(self.resources)
         self._bearing = None                       # physics.BallBearing, built at exit of initialisation
+        self._life = None                          # life.LifeAccumulator, built at exit of initialisation
         self._pending_error = None                 # a refused call, reported by the next doStep
         self._terminated = False                   # fmi2Terminate was called: no more steps
         self._loads = [0.0] * self.capacity        # ball_load_k outputs (fixed list object: getters bind to it)
@@ -126,6 +143,17 @@ class BallBearing(Fmi2Slave):
         name, unit, desc = CAGE_ANGLE
         self._register(RealVariable, name, float(BearingParameters().cage_angle_start), desc, {"unit": unit},
                        causality=output, variability=cont, initial=calculated)
+        self._empty_life = life.LifeAccumulator(life.LoadRatings.of_bearing(BearingParameters()))
+        for name, unit, desc, field in RATING_OUTPUTS:
+            self._register(RealVariable, name, float(getattr(self._empty_life.ratings, field)), desc, {"unit": unit},
+                           causality=output, variability=discrete, initial=calculated)
+        # Life outputs are computed from the accumulator when read (not every step); the FMU state restores
+        # the accumulator itself, so their setters ignore the saved values. Weak: see weak_accessors.
+        proxy = self.__dict__["_weak_self"]
+        for name, unit, desc, prop in LIFE_OUTPUTS:
+            self.register_variable(RealVariable(
+                name, type_attributes={"unit": unit}, description=desc, causality=output, variability=cont,
+                initial=calculated, getter=partial(_life_output, proxy, prop), setter=_ignore))
         # Parameters: one per BearingParameters field, with its default, unit and description;
         # the FMI type follows the default's Python type (bool -> Boolean, int -> Integer, else Real).
         for f in fields(BearingParameters):
@@ -187,6 +215,7 @@ class BallBearing(Fmi2Slave):
     def exit_initialization_mode(self):
         try:
             bearing = physics.BallBearing(self.parameters(), self.capacity)  # validates, names the parameter
+            accumulator = self._new_life(bearing.params)
             bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer)
             message = self._evaluate(float(bearing.params.cage_angle_start), bearing)
             if message is not None:
@@ -199,51 +228,37 @@ class BallBearing(Fmi2Slave):
             hold_before_raise(self)  # pythonfmu 0.7 over-releases objects on the exception path
             raise  # -> fmi2ExitInitializationMode returns fmi2Fatal (pythonfmu 0.7 has no route to fmi2Error)
         self._bearing = bearing
+        self._life = accumulator
+        self._publish_ratings(accumulator.ratings)
         inputs = (Fmi2Causality.input,)
         self._real_set = self._setters(Real, inputs)   # fixed parameters and outputs are read-only now
         self._int_set = self._setters(Integer, inputs)
         self._bool_set = self._setters(Boolean, inputs)
 
     def do_step(self, current_time, step_size):
-        bearing = self._bearing
-        if bearing is None or self._pending_error is not None:
-            reason = self._pending_error or ("the instance was terminated (fmi2Terminate)" if self._terminated
-                                             else "the instance is not initialised")
-            self._pending_error = None
-            return self._refuse_step(current_time, reason)
-        w_i, w_o = self.omega_inner, self.omega_outer
-        try:
-            bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, w_i, w_o)
-        except physics.BearingInputError as err:
-            return self._refuse_step(current_time, err)
-        if not step_size >= 0.0:
-            return self._refuse_step(current_time, f"step size {step_size!r} is not >= 0")
-        message = self._evaluate(bearing.advance_cage(self.cage_angle, w_i, w_o, step_size), bearing)
-        if message is not None:
-            return self._refuse_step(current_time, message)
+        reason = self._advance(step_size)  # BearingStepping: check inputs, advance the cage, evaluate
+        if reason is not None:
+            self._error(f"doStep at t = {current_time!r} s refused: {reason}")
+            return False  # pythonfmu 0.7: fmi2Discard; the outputs keep the values of the last good step
+        try:  # the loads at the end of the step, held over it (docs/bearing-life.md)
+            self._life.add(self._loads, self.omega_inner, self.omega_outer, step_size)
+        except Exception as err:  # never let an exception reach pythonfmu's C++ side
+            self._error(f"doStep at t = {current_time!r} s refused: life accumulation failed: {err!r}")
+            return False
         return True
 
     def terminate(self):
         self._terminated, self._bearing = True, None   # a later doStep is refused (fmi2Discard, logged)
 
-    def _refuse_step(self, current_time, reason):
-        self._error(f"doStep at t = {current_time!r} s refused: {reason}")
-        return False  # pythonfmu 0.7: fmi2Discard; the outputs keep the values of the last good step
+    @staticmethod
+    def _new_life(params):
+        """A LifeAccumulator for ``params`` (raises life.LifeInputError outside ISO 281's range)."""
+        return life.LifeAccumulator(life.LoadRatings.of_bearing(params), params.reliability_factor)
 
-    def _evaluate(self, cage_angle, bearing):
-        """Outputs at ``cage_angle`` and the held inputs; on failure return a message and change nothing."""
-        try:
-            r = bearing.evaluate(self.e_x, self.e_y, self.v_x, self.v_y, cage_angle,
-                                 self.omega_inner, self.omega_outer, self._scratch)
-        except Exception as err:  # never let an exception reach pythonfmu's C++ side
-            return f"force law failed: {err!r}"
-        if not math.isfinite(r[0] + r[1] + r[2] + r[3] + r[4] + r[5] + r[6] + r[7] + r[9] + cage_angle):
-            return f"non-finite force law result {tuple(r)} (inputs out of any physical range)"
-        (self.F_x, self.F_y, self.stiffness_xx, self.stiffness_xy, self.stiffness_yy,
-         self.damping_xx, self.damping_xy, self.damping_yy, self.loaded_balls, self.max_ball_load) = r
-        self.cage_angle = cage_angle
-        self._loads[:] = self._scratch
-        return None
+    def _publish_ratings(self, ratings):
+        """Copy the load ratings to their output variables."""
+        for name, _, _, field in RATING_OUTPUTS:
+            setattr(self, name, float(getattr(ratings, field)))
 
     def _error(self, message):
         """An error message to the host: directly (category logStatusError, also with logging off), else
@@ -304,7 +319,14 @@ class BallBearing(Fmi2Slave):
         self._pending_error = self._pending_error or msg
         return value
 
-    # --- FMU state: pythonfmu saves every registered variable (inputs, outputs incl. cage_angle, parameters)
+    # --- FMU state: pythonfmu saves every registered variable (inputs, outputs incl. cage_angle, parameters);
+    # the life accumulator's sums are added under _LIFE_STATE
+    def _get_fmu_state(self):
+        state = super()._get_fmu_state()
+        if self._life is not None:
+            state[_LIFE_STATE] = self._life.state()
+        return state
+
     @staticmethod
     def _fmu_state_from_bytes(state):
         try:
@@ -317,12 +339,24 @@ class BallBearing(Fmi2Slave):
             self._error(state[_INVALID_STATE])
             self._pending_error = self._pending_error or state[_INVALID_STATE]
             return
-        super()._set_fmu_state(state)
+        sums = state.get(_LIFE_STATE)
+        if self._life is not None:  # validate the accumulator's sums before assigning anything
+            try:
+                life.LifeAccumulator(self._life.ratings).restore(sums if sums is not None else [])
+            except Exception as err:
+                message = f"setFMUstate: no valid life accumulator in the state ({err})"
+                self._error(message)
+                self._pending_error = self._pending_error or message
+                return
+        super()._set_fmu_state({k: v for k, v in state.items() if k != _LIFE_STATE})
         if self._bearing is not None:
             try:
                 params = self.parameters()
                 if params != self._bearing.params:  # a state of an instance with other parameters
                     self._bearing = physics.BallBearing(params, self.capacity)
+                    self._life = self._new_life(params)
+                self._life.restore(sums)
+                self._publish_ratings(self._life.ratings)
             except Exception as err:
                 self._bearing = None
                 self._error(f"setFMUstate: the restored parameters are invalid: {err}")

@@ -68,7 +68,8 @@ class JournalClearance(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name)  # errors even with logging off
+        # errors reach the host even with logging off
+        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name, kwargs.get("resources"))
         guard_pythonfmu_exit(self.resources)     # pythonfmu 0.7's exit-time double free (fmu_bearing/slaves)
         release_on_free(self)                      # the last fmi2FreeInstance undoes the FMU's imports
         self._joint = None                         # physics.ClearanceJoint, built at exit of initialisation

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..cosim.record import RunResult, unit_of
+from .life import run_life
 
 
 def _figures(r: RunResult, mask: np.ndarray) -> dict:
@@ -40,10 +41,12 @@ def summary(r: RunResult) -> dict:
     if len(t) == 0:
         return result
     result["all"] = _figures(r, np.ones_like(t, dtype=bool))
+    result["life"] = run_life(r)     # bearing rating life (docs/bearing-life.md); None for other joints
     half = 0.5 * float(r.meta.get("output_interval_s") or 0.0) + 1e-12   # the step count is rounded
     if period and t[-1] >= 2 * period - half:
         rev2 = (t >= period - half) & (t <= 2 * period + half)
         result["rev2"] = _figures(r, rev2)
+        result["rev2"]["life"] = run_life(r, (period, 2 * period))
     return result
 
 

@@ -61,8 +61,9 @@ def cmd_pack(args) -> int:
     else:
         fmus = build_fmus(args.fmu_dir, args.max_balls)
     path = sm.pack(out, fmus)
-    print(f"packed {path} ({path.stat().st_size / 1024:.0f} kB): parameter sets "
-          f"{', '.join(s.name for s in sm.PARAMETER_SETS)} (default {sm.DEFAULT_PARAMETER_SET})")
+    print(f"packed {path} ({path.stat().st_size / 1024:.0f} kB): default parameter set "
+          f"{sm.DEFAULT_PARAMETER_SET} (SystemStructure.ssd), variants "
+          f"{', '.join(sm.variant_ssd_name(s.name) for s in sm.PARAMETER_SETS[1:])}")
     return 0
 
 
@@ -103,7 +104,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("ssp-simulate", help="run the SSP in another FMI tool (fmpy.ssp, libcosim, ecos)")
     p.add_argument("--tool", choices=TOOLS, default="fmpy")
     p.add_argument("--ssp", default=str(DEFAULT_ARCHIVE), help=f"SSP archive (default {DEFAULT_ARCHIVE})")
-    p.add_argument("--parameter-set", default=None, metavar="NAME", help="named parameter set (default: the first)")
+    p.add_argument("--parameter-set", default=None, metavar="NAME",
+                   help="named parameter set: the variant SSD NAME.ssd (default: the default SSD's set)")
     p.add_argument("--step", type=float, default=sm.DEFAULT_STEP, help="fixed communication step [s] (default 1e-5)")
     p.add_argument("--revs", type=float, default=0.2, help="crank revolutions (default 0.2)")
     p.add_argument("--t-end", type=float, default=None, help="end time [s] (instead of --revs)")
