@@ -68,8 +68,8 @@ def pack_link(system, joint=None, contact_points: str = "centres") -> tuple[np.n
 
 
 def workspace_size(ints: np.ndarray) -> int:
-    n, m = int(ints[1]), int(ints[2])
-    return m * n + 5 * m + m * m + 2 * n + 10 * n
+    nb, n, m = int(ints[0]), int(ints[1]), int(ints[2])
+    return m * n + 5 * m + m * m + 2 * n + 10 * n + 2 * (nb + 1)
 
 
 # ---------------------------------------------------------------------------------- kinematics
@@ -94,22 +94,44 @@ def _slices(I, W):
     Q = W[o:o + n]
     o += n
     tmp = W[o:o + n]
+    o += n
     return J, phi, gam, rhs, lam, phit, S, Q, tmp
 
 
 @njit(cache=True)
-def _body_point(q, qd, nb, b, sx, sy):
-    """(omega, u_x, u_y, x, y, xd, yd): u = A s' of a point on body b (eq. 10) and the body's state;
-    ground (b = nb): u = s', the rest 0."""
+def _rotations(q, I, W):
+    """cos and sin of every body's angle (ground: 1, 0), once per state, in W after the other slices."""
+    nb, n, m = I[0], I[1], I[2]
+    o = m * n + 5 * m + m * m + 2 * n
+    cs = W[o:o + 2 * (nb + 1)].reshape((nb + 1, 2))
+    for b in range(nb):
+        cs[b, 0] = math.cos(q[3 * b + 2])
+        cs[b, 1] = math.sin(q[3 * b + 2])
+    cs[nb, 0] = 1.0
+    cs[nb, 1] = 0.0
+    return cs
+
+
+@njit(cache=True)
+def _body_point_cs(q, qd, nb, b, sx, sy, c, s):
+    """(omega, u_x, u_y, x, y, xd, yd): u = A s' of a point on body b (eq. 10) and the body's state,
+    given c, s = cos, sin of its angle; ground (b = nb): u = s', the rest 0."""
     if b >= nb:
         return 0.0, sx, sy, 0.0, 0.0, 0.0, 0.0
-    th = q[3 * b + 2]
-    c, s = math.cos(th), math.sin(th)
     return qd[3 * b + 2], c * sx - s * sy, s * sx + c * sy, q[3 * b], q[3 * b + 1], qd[3 * b], qd[3 * b + 1]
 
 
 @njit(cache=True)
-def kinematics(q, qd, t, I, R, J, phi, gam, phit):
+def _body_point(q, qd, nb, b, sx, sy):
+    """``_body_point_cs`` computing the body's cos, sin itself."""
+    if b >= nb:
+        return 0.0, sx, sy, 0.0, 0.0, 0.0, 0.0
+    th = q[3 * b + 2]
+    return _body_point_cs(q, qd, nb, b, sx, sy, math.cos(th), math.sin(th))
+
+
+@njit(cache=True)
+def kinematics(q, qd, t, I, R, W, J, phi, gam, phit):
     """Phi (eq. 3), Phi_q, gamma (eq. 5) and Phi_t (eq. 4) in internal row order, written in place."""
     nb, n, m, K, A = I[0], I[1], I[2], I[3], I[4]
     bJ = I[H_I:H_I + K]
@@ -125,11 +147,12 @@ def kinematics(q, qd, t, I, R, J, phi, gam, phit):
     c0 = R[o + 7 * K:o + 7 * K + A]
     om = R[o + 7 * K + A:o + 7 * K + 2 * A]
     J[:, :] = 0.0
+    cs = _rotations(q, I, W)
     for k in range(K):
         j, i, r = bJ[k], bI[k], bref[k]
         # u = A s' (eq. 10) of each point, its body's position, velocity and angular velocity
-        wj, ujx, ujy, zjx, zjy, zdjx, zdjy = _body_point(q, qd, nb, j, sJx[k], sJy[k])
-        wi, uix, uiy, zix, ziy, zdix, zdiy = _body_point(q, qd, nb, i, sIx[k], sIy[k])
+        wj, ujx, ujy, zjx, zjy, zdjx, zdjy = _body_point_cs(q, qd, nb, j, sJx[k], sJy[k], cs[j, 0], cs[j, 1])
+        wi, uix, uiy, zix, ziy, zdix, zdiy = _body_point_cs(q, qd, nb, i, sIx[k], sIy[k], cs[i, 0], cs[i, 1])
         dx = (zjx - zix) + (ujx - uix)                     # d = r_J^P - r_I^P
         dy = (zjy - ziy) + (ujy - uiy)
         wujx, wujy = wj * ujx, wj * ujy
@@ -138,7 +161,7 @@ def kinematics(q, qd, t, I, R, J, phi, gam, phit):
         dcy = wj * wujy - wi * wuiy
         # n = A_ref n'; cn = conj(n)
         if r < nb and refI[k] != 0.0:
-            cr, sr = math.cos(q[3 * r + 2]), math.sin(q[3 * r + 2])
+            cr, sr = cs[r, 0], cs[r, 1]
             nx, ny = cr * npx[k] - sr * npy[k], sr * npx[k] + cr * npy[k]
             wr = qd[3 * r + 2]
         else:
@@ -269,7 +292,7 @@ def solve(qd, Q, I, R, W, qdd):
 def accelerations(q, qd, t, Q, I, R, W, qdd):
     """Kinematics and eq. (9) for the state (q, qd, t) and applied forces Q: qdd written, lambda in W."""
     J, phi, gam, _, _, phit, _, _, _ = _slices(I, W)
-    kinematics(q, qd, t, I, R, J, phi, gam, phit)
+    kinematics(q, qd, t, I, R, W, J, phi, gam, phit)
     solve(qd, Q, I, R, W, qdd)
 
 
@@ -436,7 +459,7 @@ def prepare(y, t, I, R, L, LR, W, u):
     """Kinematics of the state y at t into W and its bearing inputs into u (the tail of ``advance``)."""
     n = I[1]
     J, phi, gam, _, _, phit, _, _, _ = _slices(I, W)
-    kinematics(y[:n], y[n:], t, I, R, J, phi, gam, phit)
+    kinematics(y[:n], y[n:], t, I, R, W, J, phi, gam, phit)
     if L[0] == 1:
         link_inputs(y[:n], y[n:], I[0], L, LR, u)
 
