@@ -89,7 +89,7 @@ def ideal_counterpart(config: "RunConfig", result):
     step = max(config.step, IDEAL_STEP)
     ideal = run(replace(config, joint="ideal", mode="cosim", settings={}, balls=None, step=step, record_every=None,
                         output_interval=max(step, config.output_interval)))
-    if len(ideal.data) < len(result.data) and ideal.ok:
+    if ideal.ok and len(ideal.data) > 1 and ideal.meta.get("output_interval_s") != result.meta.get("output_interval_s"):
         ideal = resample(ideal, result["time"])
     return ideal
 
