@@ -4,6 +4,7 @@ structural parameter ``n_balls``, FMU state, and bad parameters/inputs giving an
 from __future__ import annotations
 
 import ctypes
+import json
 import math
 import os
 import subprocess
@@ -23,7 +24,9 @@ from fmpy.logging import addLoggerProxy
 from fmpy.validation import validate_fmu
 
 from conftest import built_fmu
+from fmu_bearing.life import LIFE_OUTPUTS, RATING_OUTPUTS
 from fmu_bearing.parameters import BearingParameters
+from fmu_bearing.slaves.stepping import LIFE_STATE
 
 ROOT = Path(__file__).resolve().parent.parent
 INPUTS = ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")
@@ -154,10 +157,8 @@ def test_model_description_has_the_fmi2_interface_with_one_array_of_ball_loads(f
     assert md3.coSimulation.canGetAndSetFMUstate and md3.coSimulation.canSerializeFMUstate
     v3 = {v.name: v for v in md3.modelVariables}
     v2 = {v.name: v for v in md2.modelVariables}
-    # same inputs, outputs (but the per-ball loads) and parameters, with the same units and defaults
-    from fmu_bearing.life import LIFE_NAMES, RATING_OUTPUTS
-    life_names = set(LIFE_NAMES) | {name for name, *_ in RATING_OUTPUTS}   # FMI 2 only, for now
-    names2 = {n for n in v2 if not n.startswith("ball_load_") and n not in life_names}
+    # same inputs, outputs (incl. ratings and life; but the per-ball loads) and parameters, same units and defaults
+    names2 = {n for n in v2 if not n.startswith("ball_load_")}
     assert names2 <= set(v3) and set(v3) - names2 == {"ball_loads", "time"}
     for name in names2:
         assert v3[name].causality == v2[name].causality or name == "n_balls", name
@@ -260,6 +261,118 @@ def test_fmu_state_restores_outputs_and_cage_angle(fmu3):
         assert s.outputs() == saved
         s.s.freeFMUState(state)
         s.s.freeFMUState(restored)
+    finally:
+        s.free()
+
+
+# --- bearing life: the FMI 2.0 FMU's outputs (docs/bearing-life.md) ----------------------------
+
+LIFE = [name for name, *_ in RATING_OUTPUTS + LIFE_OUTPUTS]
+
+
+def life3(s: Slave3) -> list[float]:
+    return s.s.getFloat64([s.vr[n] for n in LIFE])
+
+
+def life2(s: Slave2) -> list[float]:
+    return s.s.getReal([s.vr[n] for n in LIFE])
+
+
+def assert_same_life(out3, out2):
+    """To 1e-12 relative; an infinite life in both (before any ball is loaded) counts as equal."""
+    assert [math.isinf(x) for x in out3] == [math.isinf(x) for x in out2], (out3, out2)
+    np.testing.assert_allclose(out3, out2, rtol=1e-12, atol=0.0)
+
+
+@pytest.mark.parametrize("params", [
+    {},
+    {"n_balls": 12, "radial_clearance": -5e-6, "reliability_factor": 0.64},
+], ids=["table2", "12-balls-preload-a1"])
+def test_life_outputs_equal_the_fmi2_fmu_also_after_a_rollback(fmu3, ball_bearing_fmu, params):
+    """Both FMUs through fmpy, the same inputs and steps: ratings at initialisation, life infinite before any
+    relative rotation, then equal life after 20 steps, after 20 more, after getFMUState/setFMUState back to
+    step 20 (and a serialized FMI 3.0 state), and after 20 other steps from there."""
+    rng = np.random.default_rng(29)
+    a, b = Slave3(fmu3, params), Slave2(ball_bearing_fmu, params)   # at rest, centred: no relative rotation
+    try:
+        a.s.exitInitializationMode()
+        b.s.exitInitializationMode()
+        at_start = life3(a)
+        assert_same_life(at_start, life2(b))
+        assert at_start[3:5] == [0.0, 0.0] and math.isinf(at_start[5]) and math.isinf(at_start[6])
+        assert 1e3 < at_start[0] < 1e5            # C_r of Table 2 geometry: about 15 kN (docs/bearing-life.md)
+        t = 0.0
+
+        def steps(n):
+            nonlocal t
+            for _ in range(n):
+                h, inputs = float(rng.choice([1e-6, 1e-5, 5e-5])), random_inputs(rng)
+                a.step(t, h, inputs)
+                b.step(t, h, inputs)
+                t += h
+
+        steps(20)
+        saved3, saved2, t_saved = life3(a), life2(b), t
+        assert_same_life(saved3, saved2)
+        assert 0.0 < saved3[5] < math.inf and saved3[3] > 0.0 and saved3[4] > 0.0
+        state3, state2 = a.s.getFMUState(), b.s.getFMUstate()
+        serialized3 = a.s.serializeFMUState(state3)
+        steps(20)
+        later3 = life3(a)
+        assert_same_life(later3, life2(b))
+        assert later3[5:] != saved3[5:]                       # the life has moved on: the rollback shows
+        a.s.setFMUState(state3)
+        b.s.setFMUstate(state2)
+        assert life3(a) == saved3 and life2(b) == saved2      # each FMU exactly back
+        t = t_saved
+        steps(20)                                             # other inputs from the restored point
+        redone3 = life3(a)
+        assert_same_life(redone3, life2(b))
+        assert redone3[5:] != later3[5:]
+        restored3 = a.s.deserializeFMUState(serialized3)      # the serialized state rolls the life back too
+        a.s.setFMUState(restored3)
+        b.s.setFMUstate(state2)
+        assert life3(a) == saved3
+        t = t_saved
+        steps(5)
+        assert_same_life(life3(a), life2(b))
+        for st in (state3, restored3):
+            a.s.freeFMUState(st)
+        b.s.freeFMUstate(state2)
+    finally:
+        a.free()
+        b.free()
+
+
+def test_invalid_life_sums_in_a_state_are_refused_before_anything_is_assigned(fmu3):
+    """A serialized state whose life accumulator is missing or invalid: setFMUState assigns nothing (outputs,
+    cage angle and life unchanged), and the next doStep is refused with a message naming the accumulator."""
+    rng = np.random.default_rng(5)
+    s = Slave3(fmu3, {}, random_inputs(rng))
+    try:
+        s.s.exitInitializationMode()
+        s.step(0.0, 1e-5, random_inputs(rng))
+        state = s.s.getFMUState()
+        saved = json.loads(s.s.serializeFMUState(state).rstrip(b"\0").decode())
+        s.s.freeFMUState(state)
+        s.step(1e-5, 1e-5, random_inputs(rng))
+        now, life_now = s.outputs(), life3(s)
+        assert saved[LIFE_STATE] and saved["cage_angle"] != s.s.getFloat64([s.vr["cage_angle"]])[0]
+        for bad in ([-1.0, 0.0, 1.0, 1.0], [1.0, 2.0], "x", None):
+            broken = dict(saved)
+            if bad is None:
+                del broken[LIFE_STATE]
+            else:
+                broken[LIFE_STATE] = bad
+            restored = s.s.deserializeFMUState(json.dumps(broken).encode())
+            s.s.setFMUState(restored)
+            s.s.freeFMUState(restored)
+            assert s.outputs() == now and life3(s) == life_now
+            assert "life accumulator" in s.messages[-1][2], s.messages[-1]
+            with pytest.raises(FMICallException) as err:
+                s.s.doStep(2e-5, 1e-5)
+            assert err.value.status == DISCARD
+            assert s.outputs() == now and life3(s) == life_now
     finally:
         s.free()
 

@@ -55,6 +55,19 @@ def test_summary_life_from_the_fmu_equals_the_in_process_accumulator(runs):
         assert fmu[key] == pytest.approx(inproc[key], rel=1e-9)
 
 
+def test_fmi3_fmu_reports_the_same_life(runs, tmp_path_factory):
+    """BallBearing3 (FMI 3.0) accumulates the life like the FMI 2.0 FMU (same run, same figures)."""
+    from conftest import built_fmu
+    from mechanism.output.results import summary
+    from mechanism.run import RunConfig, run
+    fmu3 = built_fmu("BallBearing3", tmp_path_factory)
+    r3 = run(RunConfig(rpm=1200.0, revs=0.2, progress=False, fmu=str(fmu3)))
+    life3, life2 = summary(r3)["life"], summary(runs["cosim"])["life"]
+    assert life3["source"] == "component outputs"
+    for key in ("dynamic_load_rating_N", "equivalent_load_inner_N", "equivalent_load_outer_N", "rating_life_h"):
+        assert life3[key] == pytest.approx(life2[key], rel=1e-12)
+
+
 def test_fmu_final_outputs_equal_the_recorded_loads_accumulated(runs):
     """The FMU accumulates every step; the samples (every step here) accumulated afterwards agree."""
     from mechanism.output.life import run_life

@@ -9,6 +9,10 @@ The same physics, inputs, coupling outputs and parameters as the FMI 2.0 ``BallB
   integers ``Int32``; every unit is registered in ``<UnitDefinitions>`` (pythonfmu3 writes none by itself);
 * outputs are ``initial="calculated"``: they are computed when initialisation ends.
 
+The bearing-life outputs are the FMI 2.0 FMU's (docs/bearing-life.md, ``fmu_bearing.life``): the load ratings
+computed at initialisation, the life accumulated per step from the end-of-step loads (``BearingStepping``), +inf
+before any ball is loaded, the accumulator's sums in the FMU state (checked with the rest before any assignment).
+
 All physics lives in ``fmu_bearing.ball_bearing`` (``BallBearing``: ``check_inputs``, ``advance_cage``,
 ``evaluate``) and ``fmu_bearing.parameters``; this module only declares variables and calls those.
 Step semantics are those of the FMI 2.0 FMU: ``do_step`` checks the inputs, advances the cage angle over
@@ -32,6 +36,7 @@ import ctypes
 import sys
 import weakref
 from dataclasses import fields
+from functools import partial
 
 from pythonfmu3 import (Boolean, DefaultExperiment, Dimension, Fmi3Causality, Fmi3Initial, Fmi3Slave,
                         Fmi3Status, Fmi3StepResult, Fmi3Variability, Float64, Int32, UInt64, Unit)
@@ -42,10 +47,11 @@ from pythonfmu3 import (Boolean, DefaultExperiment, Dimension, Fmi3Causality, Fm
 # logger message naming the cause.
 try:
     from fmu_bearing import ball_bearing as physics
+    from fmu_bearing import life
     from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
     from fmu_bearing.parameters import BearingParameters
     from fmu_bearing.slaves import UNIT_DEFINITIONS, hold_before_raise, release_on_free, weak_accessors
-    from fmu_bearing.slaves.stepping import BearingStepping
+    from fmu_bearing.slaves.stepping import LIFE_STATE, BearingStepping, ignore_value, life_output
     _IMPORT_ERROR = None
 except Exception as _err:  # noqa: BLE001 - reported at instantiation
     _IMPORT_ERROR = _err
@@ -157,6 +163,7 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=0.1, step_size=1e-5)
 
         self._bearing = None           # physics.BallBearing, built at exit of initialisation
+        self._life = None              # life.LifeAccumulator, built at exit of initialisation
         self._terminated = False       # fmi3Terminate was called: no more steps
         self._pending_error = None     # a refused call, reported by the next doStep
         self._param_names = tuple(f.name for f in fields(BearingParameters))
@@ -179,6 +186,19 @@ class BallBearing3(Fmi3Slave, BearingStepping):
                 self._register(Float64Variable, name, start, desc, unit=unit, causality=output,
                                variability=cont, initial=calculated)
                 units.add(unit)
+        # Bearing life (fmu_bearing.life): the ratings are set at initialisation; the life outputs are read from
+        # the accumulator (an empty one before initialisation), and the FMU state restores the accumulator itself.
+        me = weakref.proxy(self)   # the accessors must not keep the slave alive (release_on_free)
+        self._empty_life = life.LifeAccumulator(life.LoadRatings.of_bearing(defaults))
+        for name, unit, desc, field in life.RATING_OUTPUTS:
+            self._register(Float64Variable, name, float(getattr(self._empty_life.ratings, field)), desc, unit=unit,
+                           causality=output, variability=discrete, initial=calculated)
+            units.add(unit)
+        for name, unit, desc, prop in life.LIFE_OUTPUTS:
+            self.register_variable(Float64Variable(
+                name, description=desc, unit=unit, causality=output, variability=cont, initial=calculated,
+                getter=partial(life_output, me, prop), setter=ignore_value))
+            units.add(unit)
         # Parameters: one per BearingParameters field, with its default, unit and description; the FMI type
         # follows the default's Python type (bool -> Boolean, int -> Int32, else Float64); n_balls, which sizes
         # ball_loads, is a UInt64 structural parameter.
@@ -200,7 +220,6 @@ class BallBearing3(Fmi3Slave, BearingStepping):
                 self._register(Float64Variable, f.name, float(f.default), desc, unit=unit, **kw)
                 units.add(unit)
         name, unit, desc = BALL_LOADS
-        me = weakref.proxy(self)   # the accessors must not keep the slave alive (release_on_free)
         self._loads_vr = len(self.vars)
         self.register_variable(Float64Array(
             name, [Dimension(valueReference=str(self._n_balls_vr))], unit=unit, description=desc,
@@ -253,6 +272,7 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             if not 3 <= self.n_balls <= MAX_BALLS:
                 raise ValueError(f"invalid parameter n_balls = {self.n_balls}: must lie in [3, {MAX_BALLS}]")
             bearing = physics.BallBearing(self.parameters())  # validates, names the parameter
+            accumulator = self._new_life(bearing.params)
             bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer)
             message = self._evaluate(float(bearing.params.cage_angle_start), bearing)
             if message is not None:
@@ -262,11 +282,13 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             self._error(f"initialisation failed: {err}")
             hold_before_raise(self)  # pythonfmu3 over-releases objects on the exception path
             raise  # -> fmi3ExitInitializationMode returns fmi3Fatal (pythonfmu3 has no route to fmi3Error)
-        self._bearing = bearing
+        self._bearing, self._life = bearing, accumulator
+        self._publish_ratings(accumulator.ratings)
         self._set = {vr: v.setter for vr, v in self.vars.items() if v.causality == Fmi3Causality.input}
 
     def do_step(self, current_time, step_size):
-        reason = self._advance(step_size)  # BearingStepping: check inputs, advance the cage, evaluate
+        # BearingStepping: check inputs, advance the cage, evaluate, add the end-of-step loads to the life
+        reason = self._advance(step_size)
         if reason is not None:
             self._error(f"doStep at t = {current_time!r} s refused: {reason}")
             return Fmi3StepResult(status=Fmi3Status.discard)  # the outputs keep the values of the last good step
@@ -354,10 +376,11 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         self._pending_error = self._pending_error or msg
         return value
 
-    # --- FMU state: every variable plus whether the instance is initialised ---------------------
+    # --- FMU state: every variable, whether the instance is initialised, the life accumulator's sums ----
     def _get_fmu_state(self):
         state = {v.name: v.getter() for v in self.vars.values()}
         state[_INITIALISED] = self._bearing is not None
+        state.update(self._life_state())
         return state
 
     @staticmethod
@@ -368,11 +391,11 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             return {_INVALID_STATE: f"fmi3DeserializeFMUState: not a serialized BallBearing3 state ({err!r})"}
 
     def _set_fmu_state(self, state):
-        """Check the whole state (names, types, parameters, array size) before assigning any of it."""
+        """Check the whole state (names, types, parameters, array size, life sums) before assigning any of it."""
         try:
             message = state.get(_INVALID_STATE) if isinstance(state, dict) else "not a BallBearing3 state"
             if message is None:
-                values, bearing = self._check_state(state)
+                values, bearing, accumulator = self._check_state(state)
         except Exception as err:
             message = f"setFMUState: invalid state ({err!r})"
         if message is not None:
@@ -380,10 +403,12 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             self._pending_error = self._pending_error or message
             return
         for name, value in values.items():
-            if name != "ball_loads":
+            if name != "ball_loads" and name not in _LIFE_NAMES:   # life outputs: from the accumulator
                 setattr(self, name, value)
         self._set_loads(values["ball_loads"])
-        self._bearing = bearing
+        self._bearing, self._life = bearing, accumulator
+        if accumulator is not None:
+            self._publish_ratings(accumulator.ratings)
         self._set = {vr: v.setter for vr, v in self.vars.items()
                      if v.causality == Fmi3Causality.input or bearing is None and v.causality in
                      (Fmi3Causality.parameter, Fmi3Causality.structuralParameter)}
@@ -400,13 +425,15 @@ class BallBearing3(Fmi3Slave, BearingStepping):
             else:
                 values[v.name] = convert[self._kind[vr]](state[v.name])
         params = BearingParameters(**{name: values[name] for name in self._param_names})
-        bearing = None
+        bearing = accumulator = None
         if state[_INITIALISED]:
             bearing = (self._bearing if self._bearing is not None and self._bearing.params == params
                        else physics.BallBearing(params))
+            accumulator = self._restored_life(params, state.get(LIFE_STATE))
         if len(values["ball_loads"]) != params.n_balls:
             raise ValueError(f"{len(values['ball_loads'])} ball loads for n_balls = {params.n_balls}")
-        return values, bearing
+        return values, bearing, accumulator
 
 
+_LIFE_NAMES = frozenset(name for name, _, _, _ in life.LIFE_OUTPUTS) if _IMPORT_ERROR is None else frozenset()
 _TYPES = {"Float64": Float64, "Int32": Int32, "UInt64": UInt64, "Boolean": Boolean}

@@ -66,7 +66,7 @@ def register(subparsers) -> None:
     p.add_argument("--window-revs", type=float, default=1.0,
                    help="crank revolutions over which the life is accumulated (default 1)")
     p.add_argument("--step", type=float, default=cases.DEFAULT_STEP,
-                   help=f"communication step = sampling interval [s] (default and maximum {cases.DEFAULT_STEP:g})")
+                   help=f"communication step = sampling interval [s] (default {cases.DEFAULT_STEP:g}, at most {cases.MAX_STEP:g})")
     p.add_argument("--workers", type=int, default=None, help="parallel runs (default: the number of cores)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_life_study)
