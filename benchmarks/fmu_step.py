@@ -139,6 +139,29 @@ def main(argv=None) -> int:
         raw_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
         raw_set.restype = raw_step.restype = raw_get.restype = ctypes.c_int
 
+        # The same FMU with pythonfmu's binary alone behind fmpy (no loader): what the loader costs a Python host.
+        plain_dir = Path(extract(str(fmu_path), unzipdir=str(Path(tmp) / "x_plain")))
+        plain_bins = plain_dir / "binaries" / "linux64"
+        plain_fmu = None
+        for original in plain_bins.glob("*_pythonfmu.so"):
+            original.replace(plain_bins / original.name.replace("_pythonfmu", ""))
+            plain_fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(plain_dir),
+                                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bench_plain")
+            plain_fmu.instantiate(loggingOn=False)
+            plain_fmu.setupExperiment(startTime=0.0)
+            plain_fmu.enterInitializationMode()
+            plain_fmu.exitInitializationMode()
+
+        def fmpy_prebuilt_plain(n):
+            p_set, p_step, p_get, p_comp = (plain_fmu.fmi2SetReal, plain_fmu.fmi2DoStep, plain_fmu.fmi2GetReal,
+                                            plain_fmu.component)
+            for i in range(n):
+                val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
+                p_set(p_comp, vr_in, 6, val_in)
+                p_step(p_comp, i * h, h, 1)
+                p_get(p_comp, vr_out, 2, val_out)
+                val_out[0], val_out[1]
+
         def fmpy_convenience(n):
             for i in range(n):
                 fmu.setReal(in_vrs, S[i % nS])
@@ -196,9 +219,12 @@ def main(argv=None) -> int:
             return evaluate
 
         c, r = args.calls, args.repeat
+        plain = {"exchange, fmpy fmi2* prebuilt, pythonfmu binary alone (no loader)": fmpy_prebuilt_plain} \
+            if plain_fmu is not None else {}
         results = medians_us({
             "exchange, fmpy setReal/doStep/getReal": fmpy_convenience,
             "exchange, fmpy fmi2* with prebuilt ctypes arrays": fmpy_prebuilt,
+            **plain,
             "exchange, raw ctypes function pointers": raw_ctypes,
             "  of which fmi2SetReal (6 values)": only_set,
             "  of which fmi2DoStep": only_step,
@@ -209,6 +235,9 @@ def main(argv=None) -> int:
         }, c, r)
         fmu.terminate()
         fmu.freeInstance()
+        if plain_fmu is not None:
+            plain_fmu.terminate()
+            plain_fmu.freeInstance()
         if not args.no_native:
             results.update(native_cycles(fmu_path, Path(tmp), c, r))
 

@@ -80,6 +80,32 @@ class BearingParameters:
         return self.eccentricity_limit if self.eccentricity_limit > 0 else 0.05 * self.ball_diameter
 
 
+#: documented physical range [min, max] of each number (SI; docs/robustness.md), far beyond any real ball
+#: bearing, so that only absurd values (a stiffness of 1e300) are refused; poisson_ratio's (0, 0.5) and the
+#: preload limit of radial_clearance are checked in ``validate`` with their reasons.
+RANGES = {
+    "n_balls": (3, 1000),
+    "ball_diameter": (1e-4, 1.0),
+    "pitch_diameter": (1e-4, 10.0),
+    "inner_race_diameter": (0.0, 10.0),
+    "outer_race_diameter": (1e-4, 10.0),
+    "bore_diameter": (0.0, 10.0),
+    "outside_diameter": (0.0, 10.0),
+    "radial_clearance": (-1e-2, 1e-2),              # preload: at most MAX_PRELOAD_FRACTION of D, below
+    "youngs_modulus": (1e6, 1e13),
+    "inner_groove_conformity": (-math.inf, 10.0),     # > 0.5: checked below with its reason
+    "outer_groove_conformity": (-math.inf, 10.0),
+    "damping_model": (0, 2),
+    "damping_coefficient": (0.0, 1e8),
+    "oil_viscosity": (0.0, 1e3),
+    "pressure_viscosity_coefficient": (0.0, 1e-6),
+    "min_film_thickness": (0.0, 1e-3),
+    "cage_angle_start": (-1e6, 1e6),
+    "contact_stiffness": (0.0, 1e14),
+    "eccentricity_limit": (0.0, 1.0),
+}
+
+
 def validate(p: BearingParameters, capacity: int | None = None) -> None:
     """Raise BearingParameterError naming the first invalid parameter of ``p``.
 
@@ -89,11 +115,18 @@ def validate(p: BearingParameters, capacity: int | None = None) -> None:
         v = getattr(p, f.name)
         if isinstance(v, float) and not math.isfinite(v):
             raise BearingParameterError(f.name, v, "must be a finite number")
-    if int(p.n_balls) != p.n_balls or p.n_balls < 3:
+        if f.type in ("int", int) and (isinstance(v, bool) or not isinstance(v, int)):
+            raise BearingParameterError(f.name, v, "must be an integer")
+        lo, hi = RANGES.get(f.name, (-math.inf, math.inf))
+        if not isinstance(v, bool) and not lo <= v <= hi:
+            unit = f.metadata.get("unit", "").strip("1")
+            raise BearingParameterError(f.name, v, f"outside its range [{lo:g}, {hi:g}] {unit}".rstrip())
+    if p.n_balls < 3:
         raise BearingParameterError("n_balls", p.n_balls, "a ball bearing needs at least 3 balls")
     if capacity is not None and p.n_balls > capacity:
         raise BearingParameterError("n_balls", p.n_balls,
-                                    f"exceeds the FMU's capacity of {capacity} balls (rebuild with --max-balls)")
+                                    f"exceeds the FMU's capacity of {capacity} balls (build one with "
+                                    f"`python build_fmu.py --max-balls {p.n_balls}` and pass it with --fmu)")
     for name in ("ball_diameter", "pitch_diameter"):
         if getattr(p, name) <= 0:
             raise BearingParameterError(name, getattr(p, name), "must be positive")

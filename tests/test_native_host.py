@@ -91,6 +91,15 @@ def test_native_host_without_setup_matches_fmpy(host, unzipdir, reference, need_
     _assert_same_forces(run_host(host, unzipdir, 1, N_STEPS, "seq", env=env), reference)
 
 
+def test_native_host_with_the_system_python_only(host, unzipdir, reference, need_libpython):
+    """PATH=/usr/bin:/bin: the system's python3 (here Debian's, standard library only, no numpy or scipy),
+    or, without one, a libpython3.X.so.1.0 found by name. Same forces."""
+    run = run_host(host, unzipdir, 1, N_STEPS, "seq", env=clean_env(PATH="/usr/bin:/bin"))
+    if run.returncode == 2 and "no usable CPython shared library" in run.stderr:
+        pytest.skip("no system Python with a shared library on this machine")
+    _assert_same_forces(run, reference)
+
+
 def test_native_host_exits_cleanly_50_times_in_a_row(host, unzipdir, reference, need_libpython):
     """50 processes (two at a time): each steps 1,000 times, checks F, frees, exits with status 0."""
     with ThreadPoolExecutor(2) as pool:

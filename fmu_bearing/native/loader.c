@@ -22,12 +22,19 @@
  *   - gives every native thread that calls the FMU one persistent Python thread state, so pythonfmu's
  *     PyGILState_Ensure/Release per call only takes and drops the GIL instead of creating and deleting a
  *     thread state (and its frame stack) on every call: the cost of a call from a native host;
+ *   - initialises the interpreter itself (Py_InitializeEx(0): no signal handlers in the host) on the
+ *     thread of the first fmi2Instantiate, when the host has not, and never finalises it: pythonfmu's
+ *     worker thread then sees an initialised Python and neither initialises nor finalises it. Finalising
+ *     an embedded interpreter at process exit from pythonfmu's worker thread crashed some hosts and can
+ *     deadlock others (threading._shutdown waits for the host thread that imported `threading`); the
+ *     FMU holds nothing that needs Python-level clean-up, so the process just exits;
  *   - calls pythonfmu's finalizePythonInterpreter() from an exit handler registered after pythonfmu's
  *     binary was loaded, so it runs before pythonfmu's own static destructor and library destructor:
- *     the interpreter is finalised once, by pythonfmu's worker thread, while the process is still
- *     intact, and pythonfmu's later double release of its state object becomes a no-op. This library
- *     pins itself (RTLD_NODELETE), so the handler runs at process exit, not at dlclose;
- *   - never passes a NULL category to the host's logger;
+ *     it only drops pythonfmu's state object (whose worker thread has long returned), and pythonfmu's
+ *     later double release of that object becomes a no-op. This library pins itself (RTLD_NODELETE), so
+ *     the handler runs at process exit, not at dlclose, and the interpreter outlives any reload;
+ *   - never passes a NULL category to the host's logger (pythonfmu's own messages go through a wrapper),
+ *     and tells the FMU's Python side the host's own callbacks (bearingLoaderHostCallbacks);
  *   - implements fmi2GetDirectionalDerivative from the FMU's tangent outputs when the build gives it a
  *     table (unknown, known) -> output holding d unknown / d known (see fmu_bearing/native/build.py);
  *     pythonfmu 0.7 does not support that call.
@@ -166,6 +173,7 @@ static struct {
 typedef int PyGILState_STATE;
 static struct {
     int (*IsInitialized)(void);
+    void (*InitializeEx)(int);
     void *(*GILState_GetThisThreadState)(void);
     PyGILState_STATE (*GILState_Ensure)(void);
     void *(*Eval_SaveThread)(void);
@@ -191,8 +199,10 @@ static Instance *live[MAX_LIVE];
 
 static int loaded = 0;           /* 1: pythonfmu's binary and Python are loaded */
 static char load_error[4096];    /* why loading failed (reported by every fmi2Instantiate) */
-static volatile unsigned python_generation = 1;  /* bumped when the interpreter is finalised */
-static THREAD_LOCAL unsigned thread_generation;  /* == python_generation: this thread has a thread state */
+#if defined(__linux__)
+__attribute__((tls_model("initial-exec")))  /* no __tls_get_addr call on every FMI call */
+#endif
+static THREAD_LOCAL int thread_attached;  /* 1: this thread has its persistent Python thread state */
 
 #ifndef _WIN32
 static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -276,13 +286,12 @@ static void forward_step_finished(fmi2ComponentEnvironment env, fmi2Status statu
 
 /* Give the calling native thread a persistent Python thread state (see the header comment). */
 static void attach_thread(void) {
-    unsigned generation = python_generation;
-    if (thread_generation == generation || py.IsInitialized == NULL || !py.IsInitialized()) return;
+    if (thread_attached || py.IsInitialized == NULL || !py.IsInitialized()) return;
     if (py.GILState_GetThisThreadState() == NULL) {
         py.GILState_Ensure();   /* creates this thread's state (count 1) and takes the GIL */
         py.Eval_SaveThread();   /* drops the GIL, keeps the state: later Ensure/Release only switch the GIL */
     }
-    thread_generation = generation;
+    thread_attached = 1;
 }
 
 /* ---- platform layer: libraries, own path, exit handler -------------------------------------------- */
@@ -345,9 +354,8 @@ static void pin_self(const char *path) {
 
 static void finalize_at_exit(void) {
     if (fmi.finalize != NULL) {
-        python_generation++;   /* thread states die with the interpreter */
-        fmi.finalize();        /* pythonfmu: drop its state object; Py_Finalize on its worker thread if it
-                                  initialised Python and no instance is alive */
+        fmi.finalize();  /* pythonfmu: drop its state object once, now (it finalises nothing: see above) */
+        fmi.finalize = NULL;
     }
 }
 
@@ -360,13 +368,15 @@ static int resolve_python(Library lib) {
 #define RESOLVE(field, name)                                                                   \
     py.field = (lib != NULL) ? lib_sym(lib, name) : process_sym(name);
     RESOLVE(IsInitialized, "Py_IsInitialized")
+    RESOLVE(InitializeEx, "Py_InitializeEx")
     RESOLVE(GILState_GetThisThreadState, "PyGILState_GetThisThreadState")
     RESOLVE(GILState_Ensure, "PyGILState_Ensure")
     RESOLVE(Eval_SaveThread, "PyEval_SaveThread")
     RESOLVE(SetPythonHome, "Py_SetPythonHome")
     RESOLVE(DecodeLocale, "Py_DecodeLocale")
 #undef RESOLVE
-    return py.IsInitialized && py.GILState_GetThisThreadState && py.GILState_Ensure && py.Eval_SaveThread;
+    return py.IsInitialized && py.InitializeEx && py.GILState_GetThisThreadState && py.GILState_Ensure &&
+           py.Eval_SaveThread;
 }
 
 static int try_library(const char *path, char *report, size_t size) {
@@ -397,7 +407,7 @@ static int try_library(const char *path, char *report, size_t size) {
 /* Ask an interpreter where its shared library is: lines "home", then candidate paths. */
 static int try_interpreter(const char *python, char *report, size_t size) {
     char command[1024], line[4096], home[4096] = "";
-    int found = 0, lines = 0;
+    int found = 0, lines = 0, own_library = 0;
     static const char script[] =
         "import os, sys, sysconfig as s; v = s.get_config_var; d = v('LIBDIR') or ''; print(sys.base_prefix); "
         "[print(os.path.join(d, n)) for n in (v('INSTSONAME'), v('LDLIBRARY')) if n and '" LIB_SUFFIX "' in n]";
@@ -415,7 +425,7 @@ static int try_interpreter(const char *python, char *report, size_t size) {
         }
         if (!found && line[0] != '\0') {
             if (access(line, R_OK) == 0) {
-                found = try_library(line, report, size);
+                found = own_library = try_library(line, report, size);
             } else {
                 const char *base = strrchr(line, '/');
                 appendf(report, size, "\n  %s (from %s): no such file", line, python);
@@ -428,7 +438,8 @@ static int try_interpreter(const char *python, char *report, size_t size) {
         appendf(report, size, "\n  %s: not found or failed (exit status %d)", python, status);
     else if (lines == 1 && !found)
         appendf(report, size, "\n  %s: has no shared libpython (built without --enable-shared)", python);
-    if (found && home[0] != '\0' && py.SetPythonHome != NULL && py.DecodeLocale != NULL && !py.IsInitialized()) {
+    /* its home only with its own library (one found by name may belong to another installation) */
+    if (own_library && home[0] != '\0' && py.SetPythonHome != NULL && py.DecodeLocale != NULL && !py.IsInitialized()) {
         wchar_t *w = py.DecodeLocale(home, NULL);
         if (w != NULL) {
             wcsncpy(python_home, w, sizeof python_home / sizeof python_home[0] - 1);
@@ -518,6 +529,11 @@ static int ensure_loaded(void) {
         return 0;
     }
     fmi.finalize = (void (*)(void))lib_sym(lib, "finalizePythonInterpreter");
+    if (!py.IsInitialized()) {
+        /* Ours, on this thread; it stays initialised until the process ends (see the header comment). */
+        py.InitializeEx(0);
+        py.Eval_SaveThread();  /* drop the GIL; this thread keeps the main thread state */
+    }
     pin_self(self);
     atexit(finalize_at_exit);  /* registered after pythonfmu's static destructors: runs before them */
     loaded = 1;
@@ -580,7 +596,6 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type type, fmi
     attach_thread();
     remember(inst, 1);
     inst->inner = fmi.Instantiate(instanceName, type, guid, resourceLocation, &inst->callbacks, visible, loggingOn);
-    attach_thread();  /* Python may have been initialised by this call */
     if (inst->inner == NULL) {
         remember(inst, 0);
         free(inst);
@@ -618,9 +633,16 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
     attach_thread();
 #if DD_COUNT > 0
     static const unsigned table[DD_COUNT][3] = DD_TABLE;
-    size_t i, j, k;
+    size_t i, j, k, n = nUnknown * nKnown;
+    if (n == 0) {
+        for (i = 0; i < nUnknown; i++) dvUnknown[i] = 0.0;
+        return fmi2OK;
+    }
+    fmi2ValueReference *sources = (fmi2ValueReference *)malloc(n * sizeof *sources);
+    fmi2Real *partials = (fmi2Real *)malloc(n * sizeof *partials);
+    fmi2Status status = fmi2Error;
+    if (sources == NULL || partials == NULL) goto done;
     for (i = 0; i < nUnknown; i++) {
-        double sum = 0.0;
         for (j = 0; j < nKnown; j++) {
             for (k = 0; k < DD_COUNT; k++)
                 if (table[k][0] == vUnknown[i] && table[k][1] == vKnown[j]) break;
@@ -632,17 +654,24 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
                          "with respect to the eccentricity and its rate, from the tangent stiffness and damping "
                          "outputs; docs/fmu-interface.md)",
                          vUnknown[i], vKnown[j]);
-                host_log(&inst->callbacks, inst, inst->name, fmi2Error, "logStatusError", message);
-                return fmi2Error;
+                host_log(inst->host_functions, inst->host_env, inst->name, fmi2Error, "logStatusError", message);
+                goto done;
             }
-            fmi2Real partial;
-            fmi2Status s = fmi.GetReal(inst->inner, &table[k][2], 1, &partial);
-            if (s > fmi2Warning) return s;
-            sum += partial * dvKnown[j];
+            sources[i * nKnown + j] = table[k][2];
         }
-        dvUnknown[i] = sum;
     }
-    return fmi2OK;
+    status = fmi.GetReal(inst->inner, sources, n, partials);  /* the tangent outputs, in one call */
+    if (status <= fmi2Warning) {
+        for (i = 0; i < nUnknown; i++) {
+            double sum = 0.0;
+            for (j = 0; j < nKnown; j++) sum += partials[i * nKnown + j] * dvKnown[j];
+            dvUnknown[i] = sum;
+        }
+    }
+done:
+    free(sources);
+    free(partials);
+    return status;
 #else
     return fmi.GetDirectionalDerivative(inst->inner, vUnknown, nUnknown, vKnown, nKnown, dvKnown, dvUnknown);
 #endif

@@ -13,8 +13,7 @@ standard library is imported here):
   ``exit_initialization_mode``). When an exception reaches pythonfmu's C++ side, it releases its references
   to the slave class, the slave instance and its log queue once in its error handler and once more in the
   instance's destructor; after a few such exceptions in one process those objects are freed while still in
-  use and the host crashes. Parking one extra reference to each balances that (at worst, if pythonfmu is
-  fixed, a small leak per failure). Better still, never let an exception escape where a status can be
+  use and the host crashes. Parking extra references balances that (a small leak per failure). Better still, never let an exception escape where a status can be
   returned instead (``do_step`` returning False gives fmi2Discard).
 * ``guard_pythonfmu_exit(resources)``: call it from the slave's ``__init__``. At process exit the binary's
   C++ static destructors delete its Python-state object and then the library destructor,
@@ -265,7 +264,9 @@ def release_on_free(slave) -> None:
             sys.modules.setdefault(name, module)
         sys.path.insert(0, entry)
     _LIVE[names] = _LIVE.get(names, 0) + 1
-    weakref.finalize(slave, _release, names, resources).atexit = False
+    release = weakref.finalize(slave, _release, names, resources)
+    release.atexit = False
+    slave.__dict__["_release_imports"] = release   # hold_before_raise runs it early (the slave stays alive)
 
 
 def _release(names, resources) -> None:
@@ -297,9 +298,14 @@ def hold_before_raise(slave) -> None:
     pythonfmu releases each of the three once in its error handler and once more in fmi2FreeInstance, one
     release too many. The slave is parked twice: it holds no reference cycle (``weak_accessors``), so one
     parked reference would let the second release free it while this list still points to it. A failed
-    instance thus stays alive (and ``release_on_free`` does not run for it): a small leak per failure.
+    instance thus stays alive (a small leak per failure); what ``release_on_free`` would undo at its free is
+    undone now (its ``sys.path`` entry; the FMU's modules if no other instance lives): the failed instance
+    can still refuse steps, be terminated, freed or reset, none of which imports anything.
     """
     PYTHONFMU_EXCEPTION_REFS.append((type(slave), slave, slave, getattr(slave, "log_queue", None)))
+    release = slave.__dict__.get("_release_imports")
+    if release is not None:
+        release()
 
 
 def guard_pythonfmu_exit(resources) -> None:

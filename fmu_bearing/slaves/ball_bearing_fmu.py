@@ -28,10 +28,11 @@ from pythonfmu.enums import Fmi2Status
 
 from fmu_bearing import ball_bearing as physics
 from fmu_bearing import life
-from fmu_bearing.parameters import BearingParameters
+from fmu_bearing.parameters import BearingParameters, validate
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
 from fmu_bearing.slaves import (HostLogger, add_initial_unknowns, add_unit_definitions, guard_pythonfmu_exit,
                                 hold_before_raise, read_build_options, release_on_free, weak_accessors)
+from fmu_bearing.slaves.state import check_state, variable_kinds
 from fmu_bearing.slaves.stepping import LIFE_STATE, BearingStepping, ignore_value, life_output
 
 #: per-ball outputs when the FMU was built without an explicit --max-balls
@@ -107,8 +108,12 @@ class BallBearing(Fmi2Slave, BearingStepping):
         # errors reach the host even with logging off
         self._host_log = HostLogger(kwargs.get("logger"), self.instance_name, kwargs.get("resources"))
         guard_pythonfmu_exit(self.resources)
-        release_on_free(self)                      # the last fmi2FreeInstance undoes the FMU's imports
-        self.capacity = read_capacity(self.resources)
+        try:
+            release_on_free(self)                  # the last fmi2FreeInstance undoes the FMU's imports
+            self.capacity = read_capacity(self.resources)
+        except Exception as err:                   # fmi2Instantiate returns NULL: say why, also with logging off
+            self._host_log(3, f"instantiation failed: {err!r}")
+            raise
         self._bearing = None                       # physics.BallBearing, built at exit of initialisation
         self._life = None                          # life.LifeAccumulator, built at exit of initialisation
         self._pending_error = None                 # a refused call, reported by the next doStep
@@ -309,28 +314,45 @@ class BallBearing(Fmi2Slave, BearingStepping):
             return {_INVALID_STATE: f"fmi2DeSerializeFMUstate: not a serialized BallBearing state ({err!r})"}
 
     def _set_fmu_state(self, state):
-        if _INVALID_STATE in state:
-            self._error(state[_INVALID_STATE])
-            self._pending_error = self._pending_error or state[_INVALID_STATE]
+        """Restore a state after checking all of it (``fmu_bearing.slaves.state``); a state that is not ours
+        is refused with a logged error, the next doStep is refused, and nothing is assigned."""
+        try:
+            problem = self._state_problem(state)
+        except Exception as err:  # no exception may reach pythonfmu's C++ side
+            problem = f"not a BallBearing state ({err!r})"
+        if problem is not None:
+            message = f"setFMUstate refused: {problem}; the instance is unchanged"
+            self._error(message)
+            self._pending_error = self._pending_error or message
             return
-        sums = state.get(LIFE_STATE)
-        if self._life is not None:  # validate the accumulator's sums before assigning anything
-            try:
-                life.LifeAccumulator(self._life.ratings).restore(sums if sums is not None else [])
-            except Exception as err:
-                message = f"setFMUstate: no valid life accumulator in the state ({err})"
-                self._error(message)
-                self._pending_error = self._pending_error or message
-                return
-        super()._set_fmu_state({k: v for k, v in state.items() if k != LIFE_STATE})
-        if self._bearing is not None:
-            try:
-                params = self.parameters()
-                if params != self._bearing.params:  # a state of an instance with other parameters
-                    self._bearing = physics.BallBearing(params, self.capacity)
-                    self._life = self._new_life(params)
-                self._life.restore(sums)
-                self._publish_ratings(self._life.ratings)
-            except Exception as err:
-                self._bearing = None
-                self._error(f"setFMUstate: the restored parameters are invalid: {err}")
+        for var in self.vars.values():
+            if var.setter is not None:
+                var.setter(state[var.name])
+        if self._life is not None:
+            self._life.restore(state.get(LIFE_STATE) or [])
+            self._publish_ratings(self._life.ratings)
+
+    def _state_problem(self, state):
+        """None if ``state`` is a complete, valid state of this instance, else what is wrong with it."""
+        if isinstance(state, dict) and _INVALID_STATE in state:
+            return str(state[_INVALID_STATE])
+        fixed = None
+        if self._bearing is not None:   # parameters are fixed once initialised: they must be this instance's
+            fixed = {name: getattr(self, name) for name in self._param_names}
+        kinds = variable_kinds(self)
+        kinds.update((name, "Real or inf") for name in life.LIFE_NAMES if name in kinds)   # an unloaded life
+        problem = check_state(state, kinds, "BallBearing", fixed, extra=(LIFE_STATE,))
+        if problem is not None:
+            return problem
+        if self._life is not None:   # the life accumulator's sums (same ratings: the parameters are fixed)
+            life.LifeAccumulator(self._life.ratings).restore(state.get(LIFE_STATE) or [])
+        params = BearingParameters(**{name: state[name] for name in self._param_names})
+        validate(params, self.capacity)
+        n = int(params.n_balls)
+        if not 0 <= state["loaded_balls"] <= n:
+            return f"loaded_balls = {state['loaded_balls']!r} is not in [0, n_balls = {n}]"
+        negative = [k for k in ["max_ball_load"] + [f"ball_load_{r + 1}" for r in range(self.capacity)]
+                    if state[k] < 0.0]
+        if negative:
+            return f"{negative[0]} = {state[negative[0]]!r} is negative"
+        return None

@@ -19,10 +19,17 @@ only at the output interval, because each value fetched through an FMU costs tim
 """
 from __future__ import annotations
 
+import atexit
 import ctypes
+import math
+import os
 import shutil
+import tempfile
+import threading
 from pathlib import Path
 from typing import Mapping, Sequence
+
+import numpy as np
 
 from fmu_bearing import life
 from fmu_bearing.ball_bearing import BallBearing, BearingInputError
@@ -44,7 +51,7 @@ class InProcessEndpoint:
     kind = "in-process"
 
     def __init__(self, parameters: BearingParameters | Mapping[str, float] | None = None,
-                 capacity: int | None = None):
+                 capacity: int | None = None, compiled: bool = True):
         if parameters is None or isinstance(parameters, BearingParameters):
             params = parameters or BearingParameters()
         else:
@@ -60,6 +67,11 @@ class InProcessEndpoint:
         self._inputs = (0.0,) * 6
         self._cage = float(params.cage_angle_start)
         self._out: tuple = ()
+        self._law = None
+        if compiled:
+            from mechanism.cosim import law_kernel
+            self._law, self._law_evaluate = law_kernel.pack_bearing(self.bearing), law_kernel.evaluate
+            self._law_out, self._law_loads = np.zeros(10), np.zeros(self.n_balls)
 
     def initialize(self, inputs: Sequence[float]) -> tuple[float, ...]:
         """Set the start inputs and return the coupling outputs at the start time."""
@@ -70,10 +82,11 @@ class InProcessEndpoint:
     def exchange(self, t: float, h: float, inputs: Sequence[float]) -> tuple[float, ...]:
         """Set inputs, advance over [t, t + h] with them held, return the end-of-step coupling outputs."""
         ex, ey, vx, vy, wi, wo = inputs
-        try:
-            self.bearing.check_inputs(ex, ey, vx, vy, wi, wo)
-        except BearingInputError as err:
-            raise ExchangeError(str(err)) from None
+        if not (math.isfinite(ex + ey + vx + vy + wi + wo) and math.hypot(ex, ey) <= self.bearing.eccentricity_limit):
+            try:
+                self.bearing.check_inputs(ex, ey, vx, vy, wi, wo)
+            except BearingInputError as err:
+                raise ExchangeError(str(err)) from None
         self.calls += 1
         self._inputs = (ex, ey, vx, vy, wi, wo)
         self._cage = self.bearing.advance_cage(self._cage, wi, wo, h)
@@ -83,10 +96,17 @@ class InProcessEndpoint:
 
     def _evaluate(self) -> None:
         ex, ey, vx, vy, wi, wo = self._inputs
-        self._out = self.bearing.evaluate(ex, ey, vx, vy, self._cage, wi, wo, self._loads)
+        if self._law is None:
+            self._out = self.bearing.evaluate(ex, ey, vx, vy, self._cage, wi, wo, self._loads)
+        else:   # the compiled second implementation (mechanism.cosim.law_kernel, tested against evaluate)
+            self._law_evaluate(self._law, ex, ey, vx, vy, self._cage, wi, wo, self._law_out, self._law_loads)
+            self._out = tuple(self._law_out.tolist())
+            self._loads[:] = self._law_loads.tolist()
 
     def sample(self) -> list[float]:
         out = self._out
+        if self._law is not None:
+            return [self._cage, out[8], out[9], *self._loads]
         return [self._cage, float(out.loaded_balls), out.max_ball_load, *self._loads]
 
     def life_outputs(self) -> dict[str, float]:
@@ -116,6 +136,44 @@ _SAMPLE_TYPES = {"Float64": (ctypes.c_double, "Float64"), "Int32": (ctypes.c_int
 _SETTABLE = ("parameter", "structuralParameter", "input")
 
 
+#: (resolved FMU path, size, mtime, GUID) -> folder it is extracted into, shared by every FMU endpoint
+_EXTRACTIONS: dict[tuple, str] = {}
+_EXTRACTIONS_LOCK = threading.Lock()
+
+
+def _remove_extractions() -> None:
+    for folder in _EXTRACTIONS.values():
+        shutil.rmtree(folder, ignore_errors=True)
+    _EXTRACTIONS.clear()
+
+
+def shared_extraction(path: Path, guid: str) -> str:
+    """The folder ``path`` (an FMU of ``guid``) is extracted into: one per FMU file and GUID in a process.
+
+    A loaded FMU binary stays mapped (unloading pythonfmu's library with Python running in it is unsafe),
+    so a fresh extraction per instance maps another copy of it every time (issue 14: 200 load/unload
+    cycles grew the resident memory by 64 MB). The folders are removed at exit; an extraction that fails
+    (a full TMPDIR) is removed at once.
+    """
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns, guid)
+    with _EXTRACTIONS_LOCK:
+        folder = _EXTRACTIONS.get(key)
+        if folder is not None and os.path.isdir(folder):
+            return folder
+        from fmpy import extract
+        folder = tempfile.mkdtemp(prefix=f"fmu_{path.stem}_")
+        try:
+            extract(str(path), unzipdir=folder)
+        except BaseException:
+            shutil.rmtree(folder, ignore_errors=True)
+            raise
+        if not _EXTRACTIONS:
+            atexit.register(_remove_extractions)
+        _EXTRACTIONS[key] = folder
+        return folder
+
+
 class _FmuBase:
     """What the FMI 2.0 and FMI 3.0 endpoints share: the FMU's model description and variables checked
     against the joint-component interface, the start values checked, errors with the FMU's last messages,
@@ -124,7 +182,7 @@ class _FmuBase:
     kind = "fmu"
 
     def __init__(self, fmu_path: str | Path, start_values: Mapping[str, float] | None, version: str):
-        from fmpy import extract, read_model_description
+        from fmpy import read_model_description
 
         self.path = Path(fmu_path)
         if not self.path.is_file():
@@ -137,18 +195,35 @@ class _FmuBase:
         if missing:
             raise ExchangeError(f"{self.path.name} lacks the variables {missing} a bearing component must have")
         self._start_values = dict(start_values or {})
-        for name in self._start_values:
-            v = self.variables.get(name)
-            if v is None or v.causality not in _SETTABLE:
-                params = sorted(n for n, x in self.variables.items() if x.causality in _SETTABLE[:2])
-                raise ExchangeError(f"{self.path.name} has no parameter {name!r} (parameters: {', '.join(params)})")
+        self._check_start_values(self._start_values)
         self.coupling_names = tuple(n for n in COUPLING_OUTPUTS if n in self.variables)
         self.messages: list[str] = []
         self.calls = 0
         self._instantiated = False
         n_balls = self.variables.get("n_balls")
         self.n_balls = int(self._start_values.get("n_balls", n_balls.start if n_balls is not None else 0))
-        self._unzipdir = extract(str(self.path))
+        self._unzipdir = shared_extraction(self.path, self.md.guid)
+
+    def _check_start_values(self, values: Mapping[str, float]) -> None:
+        """Each start value is a parameter or input of the FMU, of its type and within its declared min/max
+        (n_balls beyond the per-ball capacity: the advice names the options that fix it)."""
+        for name, value in values.items():
+            v = self.variables.get(name)
+            if v is None or v.causality not in _SETTABLE:
+                params = sorted(n for n, x in self.variables.items() if x.causality in _SETTABLE[:2])
+                raise ExchangeError(f"{self.path.name} has no parameter {name!r} (parameters: {', '.join(params)})")
+            integer = v.type.startswith(("Integer", "Int", "UInt"))
+            if integer and (isinstance(value, bool) or not float(value).is_integer()):
+                raise ExchangeError(f"invalid parameter {name} = {value!r}: must be an integer")
+            if (integer or v.type in ("Real", "Float64", "Float32")) and not isinstance(value, bool):
+                lo, hi = (float(x) if x not in (None, "") else None for x in (v.min, v.max))
+                if lo is not None and float(value) < lo:
+                    raise ExchangeError(f"invalid parameter {name} = {value!r}: below {self.path.name}'s min {lo:g}")
+                if hi is not None and float(value) > hi:
+                    advice = (f" (per-ball output capacity; build an FMU with `python build_fmu.py --max-balls "
+                              f"{value}` and pass it with --fmu)" if name == "n_balls" else "")
+                    raise ExchangeError(f"invalid parameter {name} = {value!r}: above {self.path.name}'s "
+                                        f"max {hi:g}{advice}")
 
     def _message(self, status: int, message: bytes) -> None:
         self.messages.append(f"[{_STATUS[status] if 0 <= status < len(_STATUS) else status}] "
@@ -204,7 +279,8 @@ class _FmuBase:
             self._instantiated = False
         if getattr(self, "_callbacks", None) is not None:
             release(self._callbacks)
-        shutil.rmtree(self._unzipdir, ignore_errors=True)
+            self._callbacks = None
+        # the extraction is shared (shared_extraction) and removed at exit
 
     def __enter__(self):
         return self

@@ -137,7 +137,14 @@ def validate_schema(path: Path, schema: str, shown: str | Path | None = None) ->
         raise SspError(shown, "XML", f"not well-formed: {err}") from None
     xsd = etree.XMLSchema(file=str(_schema_dir() / schema))
     if not xsd.validate(doc):
-        problems = "; ".join(f"line {e.line}: {e.message}" for e in list(xsd.error_log)[:3])
+        # name the element a violation lies in (Parameter 'n_balls', Component 'bearing', ...)
+        named = [(el.sourceline, f"{etree.QName(el).localname} {el.get('name')!r}")
+                 for el in doc.iter() if isinstance(el.tag, str) and el.get("name") is not None]
+
+        def where(line):
+            inside = [label for start, label in named if start is not None and start <= line]
+            return f" ({inside[-1]})" if inside else ""
+        problems = "; ".join(f"line {e.line}{where(e.line)}: {e.message}" for e in list(xsd.error_log)[:3])
         raise SspError(shown, f"schema {schema}", f"does not validate: {problems}")
 
 
@@ -241,6 +248,23 @@ def check_component_parameters(shown: str, component: Component, values: dict) -
                 raise SspError(shown, f"Parameter '{name}'", f"value {values[name]!r} out of range: must be positive")
 
 
+def resolve_inside(base: Path, reference: str | None, shown, element: str, what: str) -> Path:
+    """``reference`` (a component's or a ParameterBinding's ``source``) as a path inside ``base`` (the
+    unpacked archive, or the folder of an .ssd): absolute paths, URIs and ``..`` are refused, so an SSP
+    can never make us open a file outside itself."""
+    if not reference:
+        raise SspError(shown, element, f"no {what} source")
+    rel = PurePosixPath(reference.replace("\\", "/"))
+    if rel.is_absolute() or ":" in reference or ".." in rel.parts:
+        raise SspError(shown, element, f"{what} source {reference!r} must be a relative path inside the "
+                                       f"SSP (absolute paths, URIs and '..' are refused)")
+    target = (base / rel).resolve()
+    root = base.resolve()
+    if root not in target.parents:
+        raise SspError(shown, element, f"{what} source {reference!r} resolves outside the SSP ({target})")
+    return target
+
+
 def load_ssp(path: str | Path, parameter_set: str | None = None) -> SspSystem:
     """Read and check an .ssp archive (or an .ssd whose resources lie beside it) before any simulation.
 
@@ -295,7 +319,7 @@ def _load(path, ssd, base, shown, workdir, parameter_set) -> SspSystem:
         element = f"Component '{name}'"
         if node.get("type", FMU_TYPE) != FMU_TYPE:
             raise SspError(ssd_shown, element, f"type {node.get('type')!r} is not supported (FMUs only)")
-        fmu = (base / source).resolve()
+        fmu = resolve_inside(base, source, ssd_shown, element, "FMU")
         if not fmu.is_file():
             raise SspError(ssd_shown, element, f"missing FMU resource: {source} is not in the "
                                                f"{'archive' if workdir else 'folder'} (build the FMUs and pack: "
@@ -325,7 +349,7 @@ def _load(path, ssd, base, shown, workdir, parameter_set) -> SspSystem:
                 raise SspError(ssd_shown, belement, "inline ParameterValues are not supported: use a .ssv source")
             if b.get("prefix"):
                 raise SspError(ssd_shown, belement, "a prefix is not supported")
-            ssv = base / src
+            ssv = resolve_inside(base, src, ssd_shown, belement, "parameter file")
             if not ssv.is_file():
                 raise SspError(ssd_shown, belement, f"missing parameter file {src}")
             set_name, values = _read_ssv(str(shown(src)), ssv, comp)
@@ -368,6 +392,11 @@ def _load(path, ssd, base, shown, workdir, parameter_set) -> SspSystem:
             raise SspError(ssd_shown, element, f"input {key[0]}.{key[1]} is already connected")
         inputs_connected[key] = con
         connections.append(con)
+    unconnected = [f"{comp.name}.{v.name}" for comp in components.values() for v in comp.variables.values()
+                   if v.causality == "input" and (comp.name, v.name) not in inputs_connected]
+    if unconnected:
+        raise SspError(ssd_shown, "Connections", f"unconnected inputs: {', '.join(unconnected)} "
+                                                 f"(every input of every component must be connected)")
     last = {c.name: list(c.parameter_sets)[-1] for c in components.values() if c.parameter_sets}
     if len(set(last.values())) > 1:
         raise SspError(ssd_shown, "ParameterBindings", "the components end with different parameter sets "

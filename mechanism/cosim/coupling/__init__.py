@@ -40,7 +40,7 @@ no extra exchange with the component. See docs/coupling.md for the equations and
 """
 from __future__ import annotations
 
-from .base import Exchanged, Scheme
+from .base import Exchanged, ForceModel, Scheme
 from .extrapolation import LinearExtrapolation, QuadraticExtrapolation
 from .hold import ZeroOrderHold, ZeroOrderHoldJacobi
 from .jacobian import InterfaceJacobian, InterfaceJacobianDrift
@@ -58,6 +58,6 @@ def make_scheme(name: str) -> Scheme:
         raise ValueError(f"unknown coupling scheme {name!r}; choose from {', '.join(SCHEMES)}") from None
 
 
-__all__ = ["DEFAULT_SCHEME", "SCHEMES", "Exchanged", "InterfaceJacobian", "InterfaceJacobianDrift",
+__all__ = ["DEFAULT_SCHEME", "SCHEMES", "Exchanged", "ForceModel", "InterfaceJacobian", "InterfaceJacobianDrift",
            "LinearExtrapolation", "QuadraticExtrapolation", "Scheme", "ZeroOrderHold", "ZeroOrderHoldJacobi",
            "make_scheme"]

@@ -1,7 +1,7 @@
 """Zero-order hold of the exchanged force: Gauss-Seidel (``zoh``) and Jacobi (``zoh-jacobi``) ordering; 1st order."""
 from __future__ import annotations
 
-from .base import Scheme
+from .base import ForceModel, Scheme
 
 
 class ZeroOrderHold(Scheme):
@@ -12,6 +12,10 @@ class ZeroOrderHold(Scheme):
     def force(self, tau, e_x, e_y, v_x, v_y):
         x = self.past[-1]
         return x.F_x, x.F_y
+
+    def force_model(self, t0, h):
+        x = self.past[-1]
+        return ForceModel(x.t, (x.F_x, x.F_y))
 
 
 class ZeroOrderHoldJacobi(ZeroOrderHold):

@@ -5,7 +5,7 @@ the force that K and C do not explain.
 """
 from __future__ import annotations
 
-from .base import Exchanged, Scheme
+from .base import Exchanged, ForceModel, Scheme
 
 
 class InterfaceJacobian(Scheme):
@@ -16,6 +16,9 @@ class InterfaceJacobian(Scheme):
 
     def force(self, tau, e_x, e_y, v_x, v_y):
         return _linear(self.past[-1], e_x, e_y, v_x, v_y)
+
+    def force_model(self, t0, h):
+        return ForceModel.linear(self.past[-1])
 
 
 def _linear(x: Exchanged, e_x: float, e_y: float, v_x: float, v_y: float) -> tuple[float, float]:
@@ -44,3 +47,6 @@ class InterfaceJacobianDrift(InterfaceJacobian):
         fx, fy = _linear(self.past[-1], e_x, e_y, v_x, v_y)
         s = tau - self.past[-1].t
         return fx + self._drift[0] * s, fy + self._drift[1] * s
+
+    def force_model(self, t0, h):
+        return ForceModel.linear(self.past[-1], self._drift)

@@ -105,7 +105,7 @@ def markdown(advice: Advice) -> str:
     floor = {k.split("__", 1)[1]: float(v) for k, v in advice.reference.items() if k.startswith("floor__")}
     lines = [f"# Step-size advice: {operating_point(advice)}", "", f"**{one_line(advice)}**", "",
              "Criteria:", "",
-             f"- figure(s) of merit: " + "; ".join(f"`{m}` — {MERITS[m][1]} (`{MERITS[m][0]}`)" for m in c.merits)
+             "- figure(s) of merit: " + "; ".join(f"`{m}` — {MERITS[m][1]} (`{MERITS[m][0]}`)" for m in c.merits)
              + f"; relative error against the monolithic reference ≤ {100 * c.tolerance:g} %",
              f"- window: {_window(c)}; mode `{c.mode}`",
              "- stable: ran to the end with max relative force and eccentricity errors ≤ 50 % (the step-size study's)",
@@ -115,7 +115,7 @@ def markdown(advice: Advice) -> str:
              f"({advice.ladder[0]:.3g} … {advice.ladder[-1]:.3g} s)",
              "- the cheapest scheme is the one whose run at its largest step within the tolerance took the least "
              "CPU time (the wall time, also given, depends on the machine's load)",
-             f"- reference floor (rtol 1e-11 against 1e-12, relative): " +
+             "- reference floor (rtol 1e-11 against 1e-12, relative): " +
              (", ".join(f"{k} {_pct(v)}" for k, v in floor.items()) or "not measured"), "",
              "| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
     lines += ["| " + " | ".join(r) + " |" for r in table_rows(advice)]

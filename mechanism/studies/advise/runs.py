@@ -10,7 +10,7 @@ from pathlib import Path
 from fmu_bearing.parameters import BearingParameterError, from_values, validate
 from mechanism.studies.advise.search import DEFAULT_MERIT, MERITS, SchemeSearch, ladder
 from mechanism.studies.stepsize.cases import (OUTPUT_INTERVAL, StudyConfig, build_cases, physical_case,
-                                             reference_key, snap_step)
+                                             reference_key)
 from mechanism.studies.stepsize.reference import load_reference, reference_job, save_reference
 from mechanism.studies.stepsize.runs import Executor, run_case
 

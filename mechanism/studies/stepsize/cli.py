@@ -1,10 +1,9 @@
 """``python -m mechanism stepsize-study``: options, the command, and its registration."""
 from __future__ import annotations
 
-import argparse
-import sys
 from collections import Counter
-from mechanism.studies.stepsize.cases import (ADAPTIVE, SKIPPED, STABLE, DEFAULT_STEPS, DEFAULT_TOLS, DIVERGENCE, MAX_STEPS_PER_CASE, ORDER_CEILING, ORDER_FLOOR, OUTPUT_INTERVAL, StudyConfig, parse_grid, parse_settings)
+
+from mechanism.studies.stepsize.cases import (ADAPTIVE, STABLE, DEFAULT_STEPS, DEFAULT_TOLS, DIVERGENCE, MAX_STEPS_PER_CASE, ORDER_CEILING, ORDER_FLOOR, OUTPUT_INTERVAL, StudyConfig, parse_grid, parse_settings)
 from mechanism.studies.stepsize.runs import (replot, run_study)
 from mechanism.studies.stepsize.tables import step_limit
 
@@ -31,7 +30,9 @@ def cmd_stepsize(args) -> int:
         replot(config_from_args(args))
         print(f"rewrote {args.out}/stepsize_summary.json, stepsize_summary.md and plots from stepsize.csv")
         return 0
-    result = run_study(config_from_args(args))
+    config = config_from_args(args)
+    check_physical_cases(config)
+    result = run_study(config)
     print(f"wrote {result.out}/stepsize.csv, stepsize_summary.json, stepsize_summary.md and plots "
           f"({len(result.rows)} cases, {result.wall_time:.0f} s)")
     for g, info in result.summary["groups"].items():
@@ -44,8 +45,34 @@ def cmd_stepsize(args) -> int:
                        if r["status"] != STABLE)
     for (status, cause), n in failures.most_common():
         print(f"  {n} case(s) {status}: {cause or 'no message'}")
-    if result.rows and all(r["status"] not in (STABLE, SKIPPED) for r in result.rows):
-        print(f"error: every case failed (first: {result.rows[0].get('message')})", file=sys.stderr)
+    return exit_status(result.rows)
+
+
+def check_physical_cases(config: StudyConfig) -> None:
+    """Before any run: each (rpm, balls, settings) must make a valid run (``RunConfig``'s ranges and the
+    bearing's validation); ValueError naming the cause otherwise."""
+    import itertools
+
+    from mechanism.run import RunConfig
+    for rpm, balls, settings in itertools.product(config.rpms, config.balls, config.settings):
+        RunConfig(rpm=rpm, balls=balls, settings=dict(settings), revs=config.revs, fmu=config.fmu,
+                  step=config.output_interval, output_interval=config.output_interval, progress=False)
+
+
+def exit_status(rows: list[dict]) -> int:
+    """1 (with the causes on stderr) when every case failed: none that was not skipped for its cost ended
+    stable (an error, a refusal at the first step or an unstable run); 0 otherwise, where an unstable scheme
+    among stable ones is a result of the study, not an error."""
+    import sys
+
+    from mechanism.studies.stepsize.cases import SKIPPED
+    ran = [r for r in rows if r["status"] != SKIPPED]
+    broken = [r for r in ran if r["status"] != STABLE]
+    if ran and len(broken) == len(ran):
+        causes = list(dict.fromkeys(" ".join(str(r["message"]).split()) for r in broken))
+        print(f"error: every case failed ({len(ran)} cases): {causes[0]}"
+              + (f" (and {len(causes) - 1} other causes; see stepsize.csv)" if len(causes) > 1 else ""),
+              file=sys.stderr)
         return 1
     return 0
 
