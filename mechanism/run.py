@@ -18,6 +18,7 @@ from fmu_bearing.parameters import from_values as bearing_parameters
 from mechanism.cosim.adaptive import AdaptiveSettings
 from mechanism.cosim.adaptive import run_adaptive as run_adaptive_master
 from mechanism.cosim.coupling import DEFAULT_SCHEME
+from mechanism.cosim.energy import EnergyAccount
 from mechanism.cosim.endpoints import FmuEndpoint, InProcessEndpoint
 from mechanism.cosim.joint import BearingLink
 from mechanism.cosim.master import MasterSettings, run_master
@@ -114,6 +115,14 @@ def clearance_per_side(config: RunConfig) -> float:
     return 0.0
 
 
+def energy_account(config: RunConfig, system: System, link: BearingLink) -> EnergyAccount | None:
+    """The run's energy account (``mechanism.cosim.energy``): the ball bearing's law in-process; None for
+    the journal-clearance joint (its account is not implemented)."""
+    if config.joint != "bearing":
+        return None
+    return EnergyAccount(system, link, BallBearing(bearing_parameters(config.component_settings)))
+
+
 def run(config: RunConfig) -> RunResult:
     """Run the slider-crank as configured and return the recorded samples (not yet written)."""
     params = SliderCrankParameters(rpm=config.rpm, gravity=config.gravity)
@@ -147,7 +156,8 @@ def run(config: RunConfig) -> RunResult:
         endpoint = FmuEndpoint(path, config.component_settings, instance_name=config.joint)
         meta["fmu"] = str(path)
     try:
-        return run_master(system, q0, qd0, settings, observe, link=link, endpoint=endpoint, meta=meta)
+        return run_master(system, q0, qd0, settings, observe, link=link, endpoint=endpoint, meta=meta,
+                          energy=energy_account(config, system, link))
     finally:
         endpoint.close()
 
@@ -178,7 +188,8 @@ def run_adaptive(config, tol: float, initial_step: float | None = None, **settin
         meta["fmu"] = str(path)
     start = time.perf_counter()
     try:
-        result = run_adaptive_master(system, q0, qd0, adaptive, observe, link, endpoint, meta)
+        result = run_adaptive_master(system, q0, qd0, adaptive, observe, link, endpoint, meta,
+                                     energy=energy_account(config, system, link))
     finally:
         endpoint.close()
     result.meta["wall_time_s"] = time.perf_counter() - start

@@ -87,7 +87,8 @@ LEVELS = 30
 
 
 def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: AdaptiveSettings,
-                 observe: Observer, link: BearingLink, endpoint, meta: dict | None = None) -> RunResult:
+                 observe: Observer, link: BearingLink, endpoint, meta: dict | None = None,
+                 energy=None) -> RunResult:
     """Integrate to ``settings.t_end`` with adaptive communication steps and rollback (see the module docstring).
 
     ``endpoint`` must offer ``get_state``/``set_state``/``free_state`` (``FmuEndpoint`` needs an FMU
@@ -96,7 +97,7 @@ def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Adap
     dt_out = settings.output_interval
     n_out = int(round(settings.t_end / dt_out))
     h_max = min(settings.h_max or dt_out, dt_out)
-    loop = CouplingLoop(system, settings, observe, link, endpoint)
+    loop = CouplingLoop(system, settings, observe, link, endpoint, energy=energy)
     rec = Recorder(loop.columns, n_out + 2)
     info = dict(meta or {})
     info.update(output_interval_s=dt_out, t_end_s=n_out * dt_out, scheme="adaptive", inner_scheme=loop.scheme.name,
@@ -136,12 +137,12 @@ def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Adap
                     t_half = (tick + dticks // 2) * dt_out / ticks_out
                     t_new = (tick + dticks) * dt_out / ticks_out
                     try:
-                        loop.advance(y, t, H, attempt, t_new)
+                        loop.communicate(y, t, H, attempt, t_new)
                         u_big = loop.inputs
                         loop.restore(snap)
                         counts["restores"] += 1
-                        y_half = loop.advance(y, t, t_half - t, attempt, t_half)
-                        y_small = loop.advance(y_half, t_half, t_new - t_half, attempt, t_new)
+                        y_half = loop.communicate(y, t, t_half - t, attempt, t_half)
+                        y_small = loop.communicate(y_half, t_half, t_new - t_half, attempt, t_new)
                         u_small = loop.inputs
                         de = math.hypot(u_small[0] - u_big[0], u_small[1] - u_big[1])
                         dv = math.hypot(u_small[2] - u_big[2], u_small[3] - u_big[3])

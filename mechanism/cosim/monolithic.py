@@ -15,6 +15,7 @@ from scipy.integrate import BDF, LSODA, Radau
 from tqdm import tqdm
 
 from fmu_bearing.ball_bearing import BallBearing
+from mechanism.cosim.energy import ENERGY_COLUMNS, EnergyAccount
 from mechanism.cosim.joint import BearingLink
 from mechanism.cosim.master import Observer
 from mechanism.cosim.record import BASE_COLUMNS, Recorder, RunResult
@@ -42,7 +43,8 @@ def run_monolithic(system: System, link: BearingLink, bearing: BallBearing, q0: 
     n = system.n
     nb = bearing.n_balls
     sample_names = ["cage_angle", "loaded_balls", "max_ball_load"] + [f"ball_load_{r + 1}" for r in range(nb)]
-    columns = list(BASE_COLUMNS) + sample_names
+    columns = list(BASE_COLUMNS) + sample_names + list(ENERGY_COLUMNS)
+    energy = EnergyAccount(system, link, bearing)
     n_out = int(round(t_end / output_interval))
     times = np.arange(n_out + 1) * output_interval
     rec = Recorder(columns, n_out + 1)
@@ -73,6 +75,7 @@ def run_monolithic(system: System, link: BearingLink, bearing: BallBearing, q0: 
                    constraint_violation=float(np.max(np.abs(system.phi(q, t)))),
                    kinetic_energy=system.kinetic_energy(qd))
         row.update({f"ball_load_{r + 1}": loads[r] for r in range(nb)})
+        row.update(energy.update(t, q, qd, lam))
         rec.add(row)
 
     y0 = np.concatenate((q0, qd0, [bearing.params.cage_angle_start])).astype(float)

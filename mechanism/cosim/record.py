@@ -18,6 +18,8 @@ UNITS = {
     "cage_angle": "rad", "loaded_balls": "1", "max_ball_load": "N", "penetration": "m",
     "contact_force": "N", "kinetic_energy": "J", "in_contact": "1", "impact_velocity": "m/s",
     "normal_velocity": "m/s", "stiffness_skew": "N/m",
+    "contact_energy": "J", "damping_dissipation": "J", "drive_work": "J", "cage_work": "J", "applied_work": "J",
+    "energy_residual": "J",
 }
 BASE_COLUMNS = ("time", "crank_angle", "e_x", "e_y", "v_x", "v_y", "F_x", "F_y", "slider_x", "slider_v",
                 "slider_a", "crank_moment", "constraint_violation", "omega_inner", "omega_outer",

@@ -43,10 +43,11 @@ from __future__ import annotations
 from .base import Exchanged, ForceModel, Scheme
 from .extrapolation import LinearExtrapolation, QuadraticExtrapolation
 from .hold import ZeroOrderHold, ZeroOrderHoldJacobi
+from .implicit import InterfaceJacobianImplicit, InterfaceJacobianSecant
 from .jacobian import InterfaceJacobian, InterfaceJacobianDrift
 
 SCHEMES: dict[str, type[Scheme]] = {cls.name: cls for cls in (
-    InterfaceJacobianDrift, InterfaceJacobian, ZeroOrderHold, ZeroOrderHoldJacobi, LinearExtrapolation,
+    InterfaceJacobianDrift, InterfaceJacobian, InterfaceJacobianSecant, InterfaceJacobianImplicit, ZeroOrderHold, ZeroOrderHoldJacobi, LinearExtrapolation,
     QuadraticExtrapolation)}
 DEFAULT_SCHEME = InterfaceJacobianDrift.name
 
@@ -59,5 +60,6 @@ def make_scheme(name: str) -> Scheme:
 
 
 __all__ = ["DEFAULT_SCHEME", "SCHEMES", "Exchanged", "ForceModel", "InterfaceJacobian", "InterfaceJacobianDrift",
+           "InterfaceJacobianImplicit", "InterfaceJacobianSecant",
            "LinearExtrapolation", "QuadraticExtrapolation", "Scheme", "ZeroOrderHold", "ZeroOrderHoldJacobi",
            "make_scheme"]
