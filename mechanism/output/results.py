@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cosim.energy import energy_summary
 from ..cosim.record import RunResult, unit_of
 
 
@@ -40,6 +41,9 @@ def summary(r: RunResult) -> dict:
     if len(t) == 0:
         return result
     result["all"] = _figures(r, np.ones_like(t, dtype=bool))
+    energy = energy_summary(r)
+    if energy is not None:
+        result["energy"] = energy
     half = 0.5 * float(r.meta.get("output_interval_s") or 0.0) + 1e-12   # the step count is rounded
     if period and t[-1] >= 2 * period - half:
         rev2 = (t >= period - half) & (t <= 2 * period + half)
