@@ -2,16 +2,28 @@
 
 Each FMU in ``REGISTRY`` is built from its slave script with the packages it needs (``fmu_bearing``,
 and for the SliderCrank FMU also ``mechanism``) packed into the FMU's resources, so the FMU runs in
-any Python host that has numpy and scipy, without this project installed. Build options (the per-ball output capacity) are written to
-``resources/build_options.json`` inside the FMU, where the slave reads them at instantiation.
+any Python host without this project installed: BallBearing and JournalClearance need nothing beyond
+the standard library, SliderCrank (``mechanism``) needs numpy and scipy. Build options (the per-ball
+output capacity) are written to ``resources/build_options.json`` inside the FMU, where the slave reads
+them at instantiation.
+
+Sealing (``seal``): after pythonfmu has built the archive, every Python package in its resources (ours
+and pythonfmu's own copy) and the slave module are renamed to private names unique to the build
+(``_fmu_bearing_<hash>``, ``ball_bearing_fmu_<hash>``, ...; the hash is taken over the packed files),
+their absolute imports rewritten, and the names listed in ``build_options.json`` (``private_modules``).
+So the FMU runs its own copy of the physics even in a host that has imported another ``fmu_bearing``,
+two builds of one FMU never share modules, and the slave can remove exactly its own modules from
+``sys.modules`` when its last instance is freed (``fmu_bearing.slaves.release_on_free``).
 """
 from __future__ import annotations
 
 import argparse
+import ast
 import hashlib
 import importlib.util
 import json
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -109,6 +121,7 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
                                            documentation_folder=doc_dir, **spec.options)
             finally:
                 sys.path[:] = saved_path  # pythonfmu leaves the script's folder on sys.path
+            seal(fmu, max_balls)
             model_name = _model_name(fmu)
             if model_name != spec.name:
                 raise RuntimeError(f"{spec.script} defines model {model_name!r}, expected {spec.name!r}")
@@ -121,6 +134,73 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
             print(f"built {target} ({target.stat().st_size / 1024:.0f} kB, model {spec.name}"
                   + (f", per-ball outputs for up to {max_balls} balls)" if spec.name == "BallBearing" else ")"))
     return built
+
+
+def _rewrite_imports(source: str, renames: dict[str, str]) -> str:
+    """``source`` with every absolute import of a package in ``renames`` (old -> new name) renamed."""
+    names = "|".join(map(re.escape, renames))
+    pattern = re.compile(rf"^(\s*(?:from|import)\s+)({names})(?=[\s.,;]|$)", re.M)
+    return pattern.sub(lambda m: m.group(1) + renames[m.group(2)], source)
+
+
+def _unsealed_imports(source: str, renames: dict[str, str]) -> list[str]:
+    """Absolute imports of a renamed package that survived the rewrite (an import form the pattern missed)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [a.name for a in node.names if a.name.split(".")[0] in renames]
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module.split(".")[0] in renames:
+            found.append(node.module)
+    return found
+
+
+def seal(fmu: Path, max_balls: int) -> dict[str, str]:
+    """Rename the packages and the slave module packed in ``fmu`` to private names unique to the build.
+
+    Rewrites the archive in place: ``resources/<package>/`` -> ``resources/_<package>_<hash>/`` for every
+    package folder (ours and pythonfmu's), ``resources/<slave>.py`` -> ``resources/<slave>_<hash>.py``
+    (and ``slavemodule.txt``), absolute imports of those names in every packed ``.py`` file, and the build
+    options with the list of private module names. The hash (12 hex digits of SHA-256) is taken over the
+    packed files, so the same sources give the same names. Returns {old name: private name}.
+    """
+    with zipfile.ZipFile(fmu) as z:
+        entries = [(info, z.read(info)) for info in z.infolist()]
+    files = {info.filename: data for info, data in entries}
+    slave = files["resources/slavemodule.txt"].decode("utf-8").strip()
+    digest = hashlib.sha256()
+    for name in sorted(n for n in files if n.startswith("resources/")):
+        digest.update(name.encode() + b"\0" + files[name] + b"\0")
+    tag = digest.hexdigest()[:12]
+    packages = sorted({n.split("/")[1] for n in files if n.startswith("resources/") and n.count("/") >= 2})
+    renames = {package: f"_{package}_{tag}" for package in packages}
+    renames[slave] = f"{slave}_{tag}"
+    options = {**json.loads(files[f"resources/{BUILD_OPTIONS_FILE}"]), "max_balls": int(max_balls),
+               "private_modules": sorted(renames.values())}
+    tmp = fmu.with_name(fmu.name + ".sealing")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as out:
+        for info, data in entries:
+            name = info.filename
+            if name.startswith("resources/"):
+                parts = name.split("/")
+                if len(parts) > 2 and parts[1] in renames:
+                    parts[1] = renames[parts[1]]
+                elif name == f"resources/{slave}.py":
+                    parts[1] = f"{renames[slave]}.py"
+                elif name == "resources/slavemodule.txt":
+                    data = renames[slave].encode("utf-8")
+                elif name == f"resources/{BUILD_OPTIONS_FILE}":
+                    data = (json.dumps(options) + "\n").encode("utf-8")
+                name = "/".join(parts)
+                if name.endswith(".py"):
+                    text = _rewrite_imports(data.decode("utf-8"), renames)
+                    left = _unsealed_imports(text, renames)
+                    if left:
+                        raise RuntimeError(f"{name}: imports {left} could not be sealed (rewrite them as "
+                                           f"'import x' / 'from x import y' statements)")
+                    data = text.encode("utf-8")
+            out.writestr(zipfile.ZipInfo(name, date_time=info.date_time), data, zipfile.ZIP_DEFLATED)
+    os.replace(tmp, fmu)
+    return renames
 
 
 def _sources(spec: FmuSpec) -> list[Path]:

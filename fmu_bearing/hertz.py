@@ -8,14 +8,102 @@ The paper reads the dimensionless deflection delta* off a chart in Harris's
 elliptic integrals instead (``dimensionless_deflection``); eq. 26's 2.15e5 form and the
 Hamrock-Brewe closed-form approximation are kept only as cross-checks
 (``stiffness_eq26``, ``stiffness_hamrock_brewe``), see docs/modelling-choices.md.
+
+Only the Python standard library is used (this module runs inside the FMUs, whose host may
+have neither numpy nor scipy): the complete elliptic integrals come from the arithmetic-geometric
+mean (``ellipk``, ``ellipe``) and the ellipticity from Brent's bracketed root search
+(``_brent``); tests/test_hertz_stdlib.py holds them against scipy.special / scipy.optimize to 1e-13.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
-from scipy.optimize import brentq
-from scipy.special import ellipe, ellipk
+#: machine epsilon of IEEE double precision
+_EPS = 2.220446049250313e-16
+
+
+def _agm_k_e(m1: float) -> tuple[float, float]:
+    """Complete elliptic integrals (K(m), E(m)) for the complementary parameter m1 = 1 - m in (0, 1].
+
+    Gauss's arithmetic-geometric mean (Abramowitz & Stegun 17.6.1-17.6.4): a_0 = 1, b_0 = sqrt(m1),
+    c_0 = sqrt(m); a_{n+1} = (a_n + b_n)/2, b_{n+1} = sqrt(a_n b_n), c_{n+1} = (a_n - b_n)/2;
+    K = pi / (2 a_N) and E = K (1 - sum_{n>=0} 2^(n-1) c_n^2). Converges quadratically (5-7 steps).
+    Taking m1 rather than m keeps full precision near m = 1 (slender contact ellipses).
+    """
+    a, b = 1.0, math.sqrt(m1)
+    total = 0.5 * (1.0 - m1)                       # 2^-1 c_0^2, c_0^2 = m
+    power = 0.5
+    while True:
+        c = 0.5 * (a - b)
+        a, b = 0.5 * (a + b), math.sqrt(a * b)
+        power *= 2.0
+        total += power * c * c
+        if c <= _EPS * a:
+            break
+    k = math.pi / (2.0 * a)
+    return k, k * (1.0 - total)
+
+
+def ellipk(m: float) -> float:
+    """Complete elliptic integral of the first kind K(m) = int_0^{pi/2} (1 - m sin^2 t)^(-1/2) dt, 0 <= m < 1."""
+    if not 0.0 <= m < 1.0:
+        raise ValueError(f"parameter m = {m!r} must lie in [0, 1)")
+    return _agm_k_e(1.0 - m)[0]
+
+
+def ellipe(m: float) -> float:
+    """Complete elliptic integral of the second kind E(m) = int_0^{pi/2} (1 - m sin^2 t)^(1/2) dt, 0 <= m < 1."""
+    if not 0.0 <= m < 1.0:
+        raise ValueError(f"parameter m = {m!r} must lie in [0, 1)")
+    return _agm_k_e(1.0 - m)[1]
+
+
+def _brent(f: Callable[[float], float], xa: float, xb: float, xtol: float, rtol: float,
+           maxiter: int = 200) -> float:
+    """A root of f in the bracket [xa, xb] (f(xa) f(xb) <= 0) by Brent's method (Brent 1973, ch. 4).
+
+    Inverse quadratic interpolation / secant steps, safeguarded by bisection; stops when the bracket
+    is narrower than xtol + rtol |x|. The same algorithm as scipy.optimize.brentq.
+    """
+    xpre, xcur = float(xa), float(xb)
+    fpre, fcur = f(xpre), f(xcur)
+    if fpre * fcur > 0.0:
+        raise ValueError(f"f({xpre!r}) = {fpre!r} and f({xcur!r}) = {fcur!r} do not bracket a root")
+    if fpre == 0.0:
+        return xpre
+    if fcur == 0.0:
+        return xcur
+    xblk = fblk = spre = scur = 0.0
+    for _ in range(maxiter):
+        if fpre * fcur < 0.0:                      # the root lies between xpre and xcur
+            xblk, fblk = xpre, fpre
+            spre = scur = xcur - xpre
+        if abs(fblk) < abs(fcur):                  # keep the best estimate in xcur
+            xpre, xcur, xblk = xcur, xblk, xcur
+            fpre, fcur, fblk = fcur, fblk, fcur
+        delta = 0.5 * (xtol + rtol * abs(xcur))
+        sbis = 0.5 * (xblk - xcur)
+        if fcur == 0.0 or abs(sbis) < delta:
+            return xcur
+        if abs(spre) > delta and abs(fcur) < abs(fpre):
+            if xpre == xblk:                       # secant
+                stry = -fcur * (xcur - xpre) / (fcur - fpre)
+            else:                                  # inverse quadratic interpolation
+                dpre = (fpre - fcur) / (xpre - xcur)
+                dblk = (fblk - fcur) / (xblk - xcur)
+                stry = -fcur * (fblk * dblk - fpre * dpre) / (dblk * dpre * (fblk - fpre))
+            if 2.0 * abs(stry) < min(abs(spre), 3.0 * abs(sbis) - delta):
+                spre, scur = scur, stry            # accept the interpolation step
+            else:
+                spre = scur = sbis                 # bisect
+        else:
+            spre = scur = sbis                     # bisect
+        xpre, fpre = xcur, fcur
+        xcur += scur if abs(scur) > delta else (delta if sbis > 0.0 else -delta)
+        fcur = f(xcur)
+    raise RuntimeError(f"Brent's method did not converge in {maxiter} iterations")
 
 
 @dataclass(frozen=True)
@@ -60,8 +148,7 @@ def raceway_contacts(ball_diameter: float, pitch_diameter: float,
 
 def _curvature_difference(kappa: float) -> float:
     """F(rho) as a function of the contact ellipticity kappa = a/b >= 1 (exact Hertz)."""
-    m = 1.0 - 1.0 / (kappa * kappa)
-    E, K = ellipe(m), ellipk(m)
+    K, E = _agm_k_e(1.0 / (kappa * kappa))         # m1 = 1 - m = 1/kappa^2
     return ((kappa * kappa + 1.0) * E - 2.0 * K) / ((kappa * kappa - 1.0) * E)
 
 
@@ -70,14 +157,14 @@ def ellipticity(F_rho: float) -> float:
     if not 0.0 < F_rho < 1.0:
         raise ValueError(f"curvature difference F(rho) = {F_rho!r} must lie in (0, 1)")
     # F(kappa) rises monotonically from 0 (kappa -> 1) to 1 (kappa -> inf).
-    return brentq(lambda k: _curvature_difference(k) - F_rho, 1.0 + 1e-9, 1e4, xtol=1e-14, rtol=1e-14)
+    return _brent(lambda k: _curvature_difference(k) - F_rho, 1.0 + 1e-9, 1e4, xtol=1e-14, rtol=1e-14)
 
 
 def dimensionless_deflection(F_rho: float) -> float:
     """Harris's delta* = (2K(m)/pi) * [pi / (2 k^2 E(m))]^(1/3), exact (replaces the chart of eq. 24-25)."""
     kappa = ellipticity(F_rho)
-    m = 1.0 - 1.0 / (kappa * kappa)
-    return (2.0 * ellipk(m) / math.pi) * (math.pi / (2.0 * kappa * kappa * ellipe(m))) ** (1.0 / 3.0)
+    K, E = _agm_k_e(1.0 / (kappa * kappa))
+    return (2.0 * K / math.pi) * (math.pi / (2.0 * kappa * kappa * E)) ** (1.0 / 3.0)
 
 
 def contact_stiffness(sum_rho: float, delta_star: float, youngs_modulus: float, poisson_ratio: float) -> float:

@@ -386,7 +386,8 @@ def test_fmu_model_description(journal_clearance_fmu):
     outputs = {v.name: v for v in by_cause["output"]}
     assert set(FMU_OUTPUTS) | {"in_contact", "impact_velocity"} == set(outputs)
     assert {name for name, unit, _ in BALL_OUTPUTS if unit is not None and name != "max_ball_load"} <= set(outputs)
-    assert all(v.initial == "exact" for v in outputs.values())
+    assert all(v.initial == "calculated" and v.start is None for v in outputs.values())   # computed at initialisation
+    assert [u.variable.name for u in md.initialUnknowns] == list(outputs)
     assert outputs["F_x"].unit == "N" and outputs["damping_xy"].unit == "N.s/m"
     params = {v.name: v for v in by_cause["parameter"]}
     assert tuple(params) == CLEARANCE_PARAMETER_NAMES

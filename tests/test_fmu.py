@@ -173,8 +173,11 @@ def test_model_description_declares_interface_units_and_capabilities(fmu):
     for name in INPUTS:
         v = fmu.var[name]
         assert (v.causality, v.variability, v.type, float(v.start)) == ("input", "continuous", "Real", 0.0)
-    for name in REAL_OUTPUTS + ("loaded_balls", "ball_load_1"):
-        assert fmu.var[name].causality == "output" and fmu.var[name].initial == "exact"
+    for name in REAL_OUTPUTS + ("loaded_balls", "ball_load_1"):   # computed in fmi2ExitInitializationMode
+        assert fmu.var[name].causality == "output" and fmu.var[name].initial == "calculated"
+        assert fmu.var[name].start is None
+    outputs = [v for v in md.modelVariables if v.causality == "output"]
+    assert [u.variable for u in md.initialUnknowns] == outputs
     assert fmu.var["loaded_balls"].type == "Integer"
     assert fmu.capacity == 20 and "ball_load_21" not in fmu.var
     # one parameter per BearingParameters field, with its default
@@ -482,15 +485,15 @@ def test_fmu_runs_without_the_project_installed(fmu, tmp_path):
         s.setReal([vr["e_x"]], [2e-5]); s.exitInitializationMode(); s.doStep(0.0, 1e-4)
         F = s.getReal([vr["F_x"], vr["F_y"]])
         s.terminate(); s.freeInstance()
-        print(json.dumps({{"F": F, "package": sys.modules["fmu_bearing"].__file__,
-                          "slave": sys.modules["ball_bearing_fmu"].__file__}}))
+        print(json.dumps({{"F": F, "modules": {{name: getattr(m, "__file__", None) for name, m in sys.modules.items()
+                                              if "fmu_bearing" in name or "pythonfmu" in name}}}}))
     """)
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     proc = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert result["package"].startswith(str(unzipdir)) and result["slave"].startswith(str(unzipdir))
+    assert result["modules"] == {}  # freed: the FMU's (privately named) modules have left sys.modules
     K = BallBearing(TABLE2).stiffness
     expected = reference_force((2e-5, 0.0), 0.0, K, 8, HALF)
     np.testing.assert_allclose(result["F"], expected, rtol=1e-9, atol=1e-9 * abs(expected[0]))
@@ -499,15 +502,21 @@ def test_fmu_runs_without_the_project_installed(fmu, tmp_path):
 def test_fmu_packs_the_package_and_build_options(fmu):
     with zipfile.ZipFile(fmu.path) as z:
         names = set(z.namelist())
-        import build_fmu
-        assert json.loads(z.read("resources/build_options.json")) == {
-            "max_balls": 20, "sources_sha256": build_fmu.source_digest(next(s for s in build_fmu.REGISTRY
-                                                                              if s.name == "BallBearing"))}
-    for required in ("resources/ball_bearing_fmu.py", "resources/fmu_bearing/__init__.py",
-                     "resources/fmu_bearing/ball_bearing.py", "resources/fmu_bearing/hertz.py",
-                     "resources/fmu_bearing/parameters.py", "resources/pythonfmu/fmi2slave.py",
+        options = json.loads(z.read("resources/build_options.json"))
+        slave = z.read("resources/slavemodule.txt").decode()
+    # sealed (build_fmu.seal): packages and slave module under private names unique to the build
+    tag = slave.rsplit("_", 1)[1]
+    assert len(tag) == 12 and slave == f"ball_bearing_fmu_{tag}"
+    import build_fmu
+    spec = next(s for s in build_fmu.REGISTRY if s.name == "BallBearing")
+    assert options == {"max_balls": 20, "sources_sha256": build_fmu.source_digest(spec),
+                       "private_modules": [f"_fmu_bearing_{tag}", f"_pythonfmu_{tag}", slave]}
+    for required in (f"resources/{slave}.py", f"resources/_fmu_bearing_{tag}/__init__.py",
+                     f"resources/_fmu_bearing_{tag}/ball_bearing.py", f"resources/_fmu_bearing_{tag}/hertz.py",
+                     f"resources/_fmu_bearing_{tag}/parameters.py", f"resources/_pythonfmu_{tag}/fmi2slave.py",
                      "binaries/linux64/BallBearing.so"):
         assert required in names
+    assert not any(n.startswith(("resources/fmu_bearing/", "resources/pythonfmu/")) for n in names)
     assert not any("__pycache__" in n or n.endswith(".pyc") for n in names)
 
 

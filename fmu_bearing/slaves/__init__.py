@@ -22,14 +22,30 @@ standard library is imported here):
   finished ("corrupted double-linked list", SIGABRT, at random; Linux). Calling the exported
   ``finalizePythonInterpreter`` once from a Python ``atexit`` hook releases the object early and turns both
   later calls into no-ops.
+
+and what makes a built FMU a good guest in its host process (issue 13):
+
+* ``release_on_free(slave)``: call it from the slave's ``__init__``. build_fmu.py packs the FMU's Python
+  code under private module names unique to the build (``_fmu_bearing_<hash>`` ...), listed in
+  ``resources/build_options.json``; when the last instance of the FMU is freed, those modules leave
+  ``sys.modules`` and the resources folder pythonfmu put on ``sys.path`` leaves it.
+* ``HostLogger``: the host's fmi2CallbackLogger, called directly, so errors reach the host with a
+  category even when logging is off (pythonfmu 0.7 forwards nothing then).
+* ``weak_accessors(slave, name)``: variable getters/setters that hold the slave weakly, so the slave has
+  no reference cycle and is released by ``fmi2FreeInstance`` itself (which triggers ``release_on_free``).
+* ``add_initial_unknowns(root, variables)``: outputs computed at initialisation as ``<InitialUnknowns>``.
 """
 import atexit
 import ctypes
 import glob
+import json
 import math
 import os
+import platform
 import sys
 import threading
+import weakref
+from functools import partial
 from xml.etree.ElementTree import Element, SubElement
 
 #: SI base-unit exponents (and factor) of every unit our FMUs declare; None: no integer-exponent form
@@ -66,6 +82,178 @@ def add_unit_definitions(root, variables) -> None:
             SubElement(node, "BaseUnit", {k: repr(v) if k == "factor" else str(v) for k, v in exponents.items()})
     root.insert(1, units)
 
+
+def add_initial_unknowns(root, variables) -> None:
+    """List every output with initial="calculated" under <ModelStructure><InitialUnknowns> (FMI 2.0, 2.2.8):
+    our FMUs compute their outputs in fmi2ExitInitializationMode. ``variables`` in value-reference order."""
+    indices = [i for i, v in enumerate(variables, start=1)
+               if v.causality.name == "output" and v.initial is not None and v.initial.name == "calculated"]
+    if indices:
+        node = SubElement(root.find("ModelStructure"), "InitialUnknowns")
+        for index in indices:
+            SubElement(node, "Unknown", {"index": str(index)})
+
+
+def weak_accessors(slave, name):
+    """(getter, setter) of attribute ``name`` of ``slave`` that do not keep the slave alive.
+
+    pythonfmu keeps the getters in ``slave.vars``; bound to the slave itself they would make a reference
+    cycle, and the slave would outlive fmi2FreeInstance until Python's cycle collector runs.
+    """
+    proxy = slave.__dict__.get("_weak_self")
+    if proxy is None:
+        proxy = slave.__dict__["_weak_self"] = weakref.proxy(slave)
+    return partial(getattr, proxy, name), partial(setattr, proxy, name)
+
+
+# --- the host's logger --------------------------------------------------------------------------------
+
+#: fmi2CallbackLogger(componentEnvironment, instanceName, status, category, message, ...)
+_LOGGER_TYPE = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p,
+                                ctypes.c_char_p)
+#: FMI 2.0 status -> log category (the categories every pythonfmu model description declares)
+STATUS_CATEGORIES = {0: "logAll", 1: "logStatusWarning", 2: "logStatusDiscard", 3: "logStatusError",
+                     4: "logStatusFatal"}
+
+
+class HostLogger:
+    """The host's fmi2CallbackLogger, found through pythonfmu 0.7's logger object, called directly.
+
+    pythonfmu 0.7 hands every message to the host only when the host switched logging on, and its own
+    messages (the exception that fails a call) with a NULL category. FMI 2.0 lets an FMU report errors
+    regardless (the Modelica reference FMUs always log errors), which is what a host needs to learn why
+    fmi2Instantiate or fmi2ExitInitializationMode failed; so errors go straight to the host's callback.
+
+    fmpy hosts: fmpy's loggers go through one native proxy that forwards to the Python callback most recently
+    registered with ``fmpy.logging.addLoggerProxy`` (a single global), which dangles once that callback is
+    garbage collected. So a host using fmpy's default callbacks gets fmpy's own ``printLogMessage`` called
+    directly (what the default would do), and a host with its own callbacks behind fmpy's proxy gets the
+    message through pythonfmu's queue only (``available`` False), as before: never the possibly dangling proxy.
+
+    The slave receives the address of pythonfmu's C++ ``Fmi2Logger`` as the ``logger`` keyword. Its layout in
+    pythonfmu 0.7's Linux x86-64 binary (libstdc++): vtable pointer, ``bool debugLogging_``, ``std::string
+    instanceName_`` at byte 16 (data pointer, length, 16-byte local buffer), ``std::vector categories_`` at 48,
+    ``const fmi2CallbackFunctions* f_`` at 72. The layout is used only if the string at byte 16 is this
+    instance's name (length, and the local buffer for short names); otherwise ``available`` is False and
+    the slave logs through pythonfmu's queue as before.
+    """
+
+    def __init__(self, address, instance_name):
+        self._call = None
+        if not address or not sys.platform.startswith("linux") or platform.machine() not in ("x86_64", "AMD64"):
+            return
+        name = str(instance_name).encode("utf-8")
+        try:
+            words = (ctypes.c_void_p * 10).from_address(int(address))
+            data, length = words[2] or 0, words[3] or 0
+            if length != len(name) or not data:
+                return
+            if len(name) < 16 and data != int(address) + 32:   # libstdc++'s short-string buffer
+                return
+            if ctypes.string_at(data, length) != name or not words[9]:
+                return
+            callbacks = (ctypes.c_void_p * 5).from_address(words[9])   # fmi2CallbackFunctions
+            if not callbacks[0]:
+                return
+            self._environment, self._name = callbacks[4], name
+            fmpy = sys.modules.get("fmpy.fmi2")
+            if fmpy is not None and hasattr(fmpy, "defaultCallbacks"):
+                if words[9] == ctypes.addressof(fmpy.defaultCallbacks):   # fmpy's defaults: its printer
+                    printer = getattr(sys.modules.get("fmpy.fmi1"), "printLogMessage", None)
+                    self._call = partial(_call_python, printer) if callable(printer) else None
+                    return
+                if callbacks[0] == ctypes.cast(fmpy.defaultCallbacks.logger, ctypes.c_void_p).value:
+                    return                                                # fmpy's proxy: may dangle
+            self._call = partial(_call_native, _LOGGER_TYPE(callbacks[0]))
+        except (TypeError, ValueError, OSError, AttributeError):
+            self._call = None
+
+    @property
+    def available(self) -> bool:
+        return self._call is not None
+
+    def __call__(self, status: int, message: str, category=None) -> bool:
+        """Send ``message`` with FMI ``status`` (3 = error) to the host; False if the host's logger is unknown."""
+        if self._call is None:
+            return False
+        category = category or STATUS_CATEGORIES.get(int(status), "logAll")
+        try:
+            self._call(self._environment, self._name, int(status), category.encode(), str(message))
+        except Exception:   # never let a logging problem fail the FMU
+            return False
+        return True
+
+
+def _call_native(function, environment, name, status, category, message):
+    """An fmi2CallbackLogger: the message is a printf format, so '%' is escaped (no variadic arguments)."""
+    function(environment, name, status, category, message.replace("%", "%%").encode("utf-8", "replace"))
+
+
+def _call_python(printer, environment, name, status, category, message):
+    """fmpy's printLogMessage, which takes the formatted message."""
+    printer(environment, name, status, category, message.encode("utf-8", "replace"))
+
+
+# --- sealed modules: leave sys.path and sys.modules as the FMU found them -----------------------------
+
+BUILD_OPTIONS_FILE = "build_options.json"
+#: live instances per sealed FMU build, keyed by its private module names
+_LIVE = {}
+#: what the last free of a build removed: restored if pythonfmu builds a new instance of the same class (fmi2Reset)
+_RELEASED = {}
+
+
+def read_build_options(resources) -> dict:
+    """resources/build_options.json of a built FMU ({} in-process, or without the file)."""
+    if not resources:
+        return {}
+    path = os.path.join(str(resources), BUILD_OPTIONS_FILE)
+    if not os.path.isfile(path):
+        return {}
+    with open(path, encoding="utf-8") as fh:
+        return json.load(fh)
+
+
+def release_on_free(slave) -> None:
+    """Register ``slave`` so that freeing the FMU's last instance undoes its imports.
+
+    pythonfmu's fmi2Instantiate puts the resources folder at the front of ``sys.path`` (once per instance)
+    and imports the slave module from it. build_fmu.py names every packed module privately for the build
+    (``build_options.json``: ``private_modules``), so the modules it added are exactly those names: at the
+    free of the last instance they are removed from ``sys.modules`` and one ``sys.path`` entry per
+    instance is removed. Standard-library modules imported on the way stay (they are the host's own).
+    Needs the slave to be free of reference cycles (``weak_accessors``): it is released when
+    fmi2FreeInstance drops pythonfmu's reference. No-op in-process (no resources) and for unsealed builds.
+    """
+    names = tuple(read_build_options(slave.resources).get("private_modules", ()))
+    if not names:
+        return
+    resources = str(slave.resources)
+    if not _LIVE.get(names) and names in _RELEASED:   # fmi2Reset: a new instance of the released class
+        modules, entry = _RELEASED.pop(names)
+        for name, module in modules.items():
+            sys.modules.setdefault(name, module)
+        sys.path.insert(0, entry)
+    _LIVE[names] = _LIVE.get(names, 0) + 1
+    weakref.finalize(slave, _release, names, resources).atexit = False
+
+
+def _release(names, resources) -> None:
+    try:
+        sys.path.remove(resources)             # the entry fmi2Instantiate inserted for this instance
+    except ValueError:
+        pass
+    _LIVE[names] -= 1
+    if _LIVE[names] > 0:
+        return
+    prefixes = tuple(name + "." for name in names)
+    removed = {name: sys.modules.pop(name) for name in list(sys.modules)
+               if name in names or name.startswith(prefixes)}
+    if resources not in sys.path:
+        sys.path_importer_cache.pop(resources, None)
+    _RELEASED[names] = (removed, resources)
+
+
 #: extra references that balance pythonfmu 0.7's over-release on the exception path (see above)
 PYTHONFMU_EXCEPTION_REFS = []
 
@@ -74,8 +262,14 @@ _EXIT_GUARDED = set()
 
 
 def hold_before_raise(slave) -> None:
-    """Keep the slave's class, the slave and its log queue alive across pythonfmu's exception path."""
-    PYTHONFMU_EXCEPTION_REFS.append((type(slave), slave, getattr(slave, "log_queue", None)))
+    """Keep the slave's class, the slave and its log queue alive across pythonfmu's exception path.
+
+    pythonfmu releases each of the three once in its error handler and once more in fmi2FreeInstance, one
+    release too many. The slave is parked twice: it holds no reference cycle (``weak_accessors``), so one
+    parked reference would let the second release free it while this list still points to it. A failed
+    instance thus stays alive (and ``release_on_free`` does not run for it): a small leak per failure.
+    """
+    PYTHONFMU_EXCEPTION_REFS.append((type(slave), slave, slave, getattr(slave, "log_queue", None)))
 
 
 def guard_pythonfmu_exit(resources) -> None:

@@ -6,10 +6,11 @@ FMI variables and calls those functions. The interface is documented in docs/fmu
 
 Step semantics: ``do_step(t, h)`` checks the inputs, advances the cage angle over [t, t + h] with the
 inputs held, and evaluates the force law at the new cage angle, so every output describes the END of
-the step. On an error the message goes to the FMI logger (status error) and the step returns False
-(pythonfmu 0.7: fmi2Discard), leaving the outputs of the last good step untouched (never NaN); invalid
+the step. On an error the message goes to the FMI logger (status error, category logStatusError, also
+when logging is off: ``HostLogger``) and the step returns False (pythonfmu 0.7: fmi2Discard), leaving the
+outputs of the last good step untouched (never NaN); so does a doStep after fmi2Terminate. Invalid
 parameters fail fmi2ExitInitializationMode (pythonfmu 0.7: fmi2Fatal, the only non-OK status it gives
-that call).
+that call). The outputs are computed there: they are declared initial="calculated" (InitialUnknowns).
 
 The per-ball output capacity is a build option (``python build_fmu.py --max-balls N``), read at
 instantiation from ``resources/build_options.json``; ``n_balls`` is a parameter up to that capacity.
@@ -18,9 +19,7 @@ This file is the FMU's slave module: pythonfmu's binary imports it as a top-leve
 the slave class by matching its source lines against a class statement deriving from Fmi2Slave, so
 it uses absolute imports only and no ``from __future__`` import.
 """
-import json
 import math
-import os
 from dataclasses import fields
 from functools import partial
 
@@ -31,12 +30,11 @@ from pythonfmu.enums import Fmi2Status
 from fmu_bearing import ball_bearing as physics
 from fmu_bearing.parameters import BearingParameters
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
-from fmu_bearing.slaves import add_unit_definitions, guard_pythonfmu_exit, hold_before_raise
+from fmu_bearing.slaves import (HostLogger, add_initial_unknowns, add_unit_definitions, guard_pythonfmu_exit,
+                                hold_before_raise, read_build_options, release_on_free, weak_accessors)
 
 #: per-ball outputs when the FMU was built without an explicit --max-balls
 DEFAULT_CAPACITY = 20
-#: build options written into the FMU's resources folder by build_fmu.py
-BUILD_OPTIONS_FILE = "build_options.json"
 
 #: (name, unit, description) of the inputs, in value-reference order: the joint-component interface
 INPUTS = JOINT_INPUTS
@@ -60,13 +58,7 @@ _INTEGER_RANGES = {"n_balls": (3, None), "damping_model": (0, 2)}
 
 def read_capacity(resources) -> int:
     """Per-ball output capacity from the FMU's resources/build_options.json (DEFAULT_CAPACITY without one)."""
-    if resources:
-        path = os.path.join(str(resources), BUILD_OPTIONS_FILE)
-        if os.path.isfile(path):
-            with open(path, encoding="utf-8") as fh:
-                capacity = int(json.load(fh).get("max_balls", DEFAULT_CAPACITY))
-            return max(capacity, 3)
-    return DEFAULT_CAPACITY
+    return max(int(read_build_options(resources).get("max_balls", DEFAULT_CAPACITY)), 3)
 
 
 class _TypeAttributes:
@@ -108,34 +100,37 @@ class BallBearing(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name)  # errors even with logging off
         guard_pythonfmu_exit(self.resources)
+        release_on_free(self)                      # the last fmi2FreeInstance undoes the FMU's imports
         self.capacity = read_capacity(self.resources)
         self._bearing = None                       # physics.BallBearing, built at exit of initialisation
         self._pending_error = None                 # a refused call, reported by the next doStep
+        self._terminated = False                   # fmi2Terminate was called: no more steps
         self._loads = [0.0] * self.capacity        # ball_load_k outputs (fixed list object: getters bind to it)
         self._scratch = [0.0] * self.capacity      # evaluate() writes here; copied to _loads on success
         self._param_names = tuple(f.name for f in fields(BearingParameters))
 
         cont, fixed, discrete = Fmi2Variability.continuous, Fmi2Variability.fixed, Fmi2Variability.discrete
-        output, exact = Fmi2Causality.output, Fmi2Initial.exact
+        output, calculated = Fmi2Causality.output, Fmi2Initial.calculated   # outputs: computed at initialisation
         for name, unit, desc in INPUTS:
             self._register(RealVariable, name, 0.0, desc, {"unit": unit},
                            causality=Fmi2Causality.input, variability=cont)
         for name, unit, desc in FORCE_OUTPUTS:
             if unit is None:
                 self._register(IntegerVariable, name, 0, desc, None,
-                               causality=output, variability=discrete, initial=exact)
+                               causality=output, variability=discrete, initial=calculated)
             else:
                 self._register(RealVariable, name, 0.0, desc, {"unit": unit},
-                               causality=output, variability=cont, initial=exact)
+                               causality=output, variability=cont, initial=calculated)
         name, unit, desc = CAGE_ANGLE
         self._register(RealVariable, name, float(BearingParameters().cage_angle_start), desc, {"unit": unit},
-                       causality=output, variability=cont, initial=exact)
+                       causality=output, variability=cont, initial=calculated)
         # Parameters: one per BearingParameters field, with its default, unit and description;
         # the FMI type follows the default's Python type (bool -> Boolean, int -> Integer, else Real).
         for f in fields(BearingParameters):
             desc = f.metadata.get("description", f.name)
-            kwargs = dict(causality=Fmi2Causality.parameter, variability=fixed, initial=exact)
+            kwargs = dict(causality=Fmi2Causality.parameter, variability=fixed, initial=Fmi2Initial.exact)
             if isinstance(f.default, bool):
                 self._register(BooleanVariable, f.name, bool(f.default), desc, None, **kwargs)
             elif isinstance(f.default, int):
@@ -152,7 +147,7 @@ class BallBearing(Fmi2Slave):
             self.register_variable(RealVariable(
                 f"ball_load_{k + 1}", type_attributes={"unit": "N"},
                 description=f"load on ball {k + 1} (0 outside the load zone, and for balls beyond n_balls)",
-                causality=output, variability=cont, initial=exact,
+                causality=output, variability=cont, initial=calculated,
                 getter=partial(loads.__getitem__, k), setter=partial(loads.__setitem__, k)))
         assert [self.vars[vr].name for vr in _INPUT_VRS] == [name for name, _, _ in INPUTS]
         # Value reference -> getter/setter maps for the fast paths. Before initialisation every
@@ -165,18 +160,19 @@ class BallBearing(Fmi2Slave):
     # --- registration helpers (build time and instantiation only) ------------------------------
     def _register(self, cls, name, start, description, type_attributes, **kwargs):
         setattr(self, name, start)
+        getter, setter = weak_accessors(self, name)
         self.register_variable(cls(name, type_attributes=type_attributes, description=description,
-                                   getter=partial(getattr, self, name), setter=partial(setattr, self, name),
-                                   **kwargs))
+                                   getter=getter, setter=setter, **kwargs))
 
     def _setters(self, kind, causalities):
         return {vr: v.setter for vr, v in self.vars.items()
                 if isinstance(v, kind) and (causalities is None or v.causality in causalities)}
 
     def to_xml(self, model_options=dict()):
-        """pythonfmu's modelDescription plus <UnitDefinitions> for every unit the variables use."""
+        """pythonfmu's modelDescription plus <UnitDefinitions> and the outputs as <InitialUnknowns>."""
         root = super().to_xml(model_options)
         add_unit_definitions(root, self.vars.values())
+        add_initial_unknowns(root, self.vars.values())
         return root
 
     # --- FMI ----------------------------------------------------------------------------------
@@ -197,7 +193,9 @@ class BallBearing(Fmi2Slave):
                 raise FloatingPointError(message)
         except Exception as err:
             self._bearing = None
-            self._error(f"initialisation failed: {err}")
+            # To the host directly (also with logging off), not through pythonfmu's queue: pythonfmu then
+            # logs the exception itself (logging on) instead of "unknown error" after a queued message.
+            self._host_log(3, f"initialisation failed: {err}")
             hold_before_raise(self)  # pythonfmu 0.7 over-releases objects on the exception path
             raise  # -> fmi2ExitInitializationMode returns fmi2Fatal (pythonfmu 0.7 has no route to fmi2Error)
         self._bearing = bearing
@@ -209,7 +207,8 @@ class BallBearing(Fmi2Slave):
     def do_step(self, current_time, step_size):
         bearing = self._bearing
         if bearing is None or self._pending_error is not None:
-            reason = self._pending_error or "the instance is not initialised"
+            reason = self._pending_error or ("the instance was terminated (fmi2Terminate)" if self._terminated
+                                             else "the instance is not initialised")
             self._pending_error = None
             return self._refuse_step(current_time, reason)
         w_i, w_o = self.omega_inner, self.omega_outer
@@ -223,6 +222,9 @@ class BallBearing(Fmi2Slave):
         if message is not None:
             return self._refuse_step(current_time, message)
         return True
+
+    def terminate(self):
+        self._terminated, self._bearing = True, None   # a later doStep is refused (fmi2Discard, logged)
 
     def _refuse_step(self, current_time, reason):
         self._error(f"doStep at t = {current_time!r} s refused: {reason}")
@@ -244,8 +246,10 @@ class BallBearing(Fmi2Slave):
         return None
 
     def _error(self, message):
-        # The FMI logger's message is a printf format: escape '%'.
-        self.log(str(message).replace("%", "%%"), Fmi2Status.error)
+        """An error message to the host: directly (category logStatusError, also with logging off), else
+        through pythonfmu's queue (only with logging on). The FMI logger's message is a printf format."""
+        if not self._host_log(3, message):
+            self.log(str(message).replace("%", "%%"), Fmi2Status.error)
 
     # --- fast paths: pythonfmu loops over Fmi2Slave.vars with isinstance checks per value --------
     def get_real(self, vrs):

@@ -13,8 +13,10 @@ Step semantics: ``do_step(t, h)`` checks the inputs, advances the contact state 
 every output describes the END of the step. The contact state (``in_contact``,
 ``impact_velocity``) is a registered output, so fmi2GetFMUstate / fmi2SetFMUstate and their
 serialised forms restore it with everything else. On an error the message goes to the FMI logger
-(status error) and the step returns a non-OK status (pythonfmu 0.7: fmi2Discard), leaving outputs
-and state of the last good step untouched, so the master may restore and retry.
+(status error, category logStatusError, also when logging is off) and the step returns a non-OK status
+(pythonfmu 0.7: fmi2Discard), leaving outputs and state of the last good step untouched, so the master
+may restore and retry; a doStep after fmi2Terminate is refused the same way. The outputs are computed
+in fmi2ExitInitializationMode and declared initial="calculated" (InitialUnknowns).
 
 As in ``ball_bearing_fmu``: pythonfmu finds the class by the literal text
 ``class JournalClearance(Fmi2Slave):`` and imports this file as a top-level module, so it uses
@@ -23,7 +25,6 @@ unit table are imported from ``ball_bearing_fmu``.
 """
 import math
 from dataclasses import fields
-from functools import partial
 
 from pythonfmu import DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
 from pythonfmu.enums import Fmi2Status
@@ -32,7 +33,8 @@ from fmu_bearing import clearance_joint as physics
 from fmu_bearing.ball_bearing import BearingInputError
 from fmu_bearing.clearance_joint import ClearanceParameters, ContactState
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
-from fmu_bearing.slaves import add_unit_definitions, guard_pythonfmu_exit, hold_before_raise
+from fmu_bearing.slaves import (HostLogger, add_initial_unknowns, add_unit_definitions, guard_pythonfmu_exit,
+                                hold_before_raise, release_on_free, weak_accessors)
 from fmu_bearing.slaves.ball_bearing_fmu import BooleanVariable, RealVariable
 
 #: (name, unit, description) of the inputs, in value-reference order: those of the BallBearing FMU
@@ -66,24 +68,27 @@ class JournalClearance(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name)  # errors even with logging off
         guard_pythonfmu_exit(self.resources)     # pythonfmu 0.7's exit-time double free (fmu_bearing/slaves)
+        release_on_free(self)                      # the last fmi2FreeInstance undoes the FMU's imports
         self._joint = None                         # physics.ClearanceJoint, built at exit of initialisation
+        self._terminated = False                   # fmi2Terminate was called: no more steps
         self._param_names = tuple(f.name for f in fields(ClearanceParameters))
         cont, fixed, discrete = Fmi2Variability.continuous, Fmi2Variability.fixed, Fmi2Variability.discrete
         for name, unit, desc in INPUTS:
             self._real(name, 0.0, unit, desc, causality=Fmi2Causality.input, variability=cont)
         for name, unit, desc in FORCE_OUTPUTS:
             self._real(name, 0.0, unit, desc, causality=Fmi2Causality.output, variability=cont,
-                       initial=Fmi2Initial.exact)
+                       initial=Fmi2Initial.calculated)
         name, unit, desc = IMPACT_VELOCITY
         self._real(name, 0.0, unit, desc, causality=Fmi2Causality.output, variability=discrete,
-                   initial=Fmi2Initial.exact)
+                   initial=Fmi2Initial.calculated)
         name, desc = IN_CONTACT
         setattr(self, name, False)
+        getter, setter = weak_accessors(self, name)
         self.register_variable(BooleanVariable(name, description=desc, causality=Fmi2Causality.output,
-                                               variability=discrete, initial=Fmi2Initial.exact,
-                                               getter=partial(getattr, self, name),
-                                               setter=partial(setattr, self, name)))
+                                               variability=discrete, initial=Fmi2Initial.calculated,
+                                               getter=getter, setter=setter))
         # Parameters: one per ClearanceParameters field, with its default, unit and description.
         for f in fields(ClearanceParameters):
             self._real(f.name, float(f.default), f.metadata.get("unit") or None,
@@ -92,14 +97,15 @@ class JournalClearance(Fmi2Slave):
 
     def _real(self, name, start, unit, description, **kwargs):
         setattr(self, name, start)
+        getter, setter = weak_accessors(self, name)
         self.register_variable(RealVariable(name, type_attributes={"unit": unit}, description=description,
-                                            getter=partial(getattr, self, name),
-                                            setter=partial(setattr, self, name), **kwargs))
+                                            getter=getter, setter=setter, **kwargs))
 
     def to_xml(self, model_options=dict()):
-        """pythonfmu's modelDescription plus <UnitDefinitions> for every unit the variables use."""
+        """pythonfmu's modelDescription plus <UnitDefinitions> and the outputs as <InitialUnknowns>."""
         root = super().to_xml(model_options)
         add_unit_definitions(root, self.vars.values())
+        add_initial_unknowns(root, self.vars.values())
         return root
 
     # --- FMI ----------------------------------------------------------------------------------
@@ -116,20 +122,24 @@ class JournalClearance(Fmi2Slave):
             joint = physics.ClearanceJoint(self.parameters())   # validates, names the parameter
             joint.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer)
         except Exception as err:
-            self._error(f"initialisation failed: {err}")
+            # to the host directly, not queued (see ball_bearing_fmu): pythonfmu then logs the exception itself
+            self._host_log(3, f"initialisation failed: {err}")
             hold_before_raise(self)  # pythonfmu 0.7 over-releases objects on the exception path
             raise  # pythonfmu 0.7 turns an exception into a non-OK status (fmi2Fatal)
         self._joint = joint
         message = self._evaluate()
         if message is not None:
-            self._error(f"initialisation failed: {message}")
+            self._joint = None
+            self._host_log(3, f"initialisation failed: {message}")
             hold_before_raise(self)
             raise FloatingPointError(message)
 
     def do_step(self, current_time, step_size):
         joint = self._joint
         if joint is None:
-            self._error("doStep called before initialisation")
+            self._error(f"doStep at t = {current_time!r} s rejected: "
+                        + ("the instance was terminated (fmi2Terminate)" if self._terminated
+                           else "called before initialisation"))
             return False
         try:
             joint.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer)
@@ -158,9 +168,14 @@ class JournalClearance(Fmi2Slave):
         self.in_contact, self.impact_velocity = bool(state.in_contact), float(state.impact_velocity)
         return None
 
+    def terminate(self):
+        self._terminated, self._joint = True, None   # a later doStep is refused (fmi2Discard, logged)
+
     def _error(self, message):
-        # The FMI logger's message is a printf format: escape '%'.
-        self.log(str(message).replace("%", "%%"), Fmi2Status.error)
+        """To the host directly (category logStatusError, also with logging off), else through pythonfmu's
+        queue (only with logging on). The FMI logger's message is a printf format: escape '%'."""
+        if not self._host_log(3, message):
+            self.log(str(message).replace("%", "%%"), Fmi2Status.error)
 
     def set_real(self, vrs, values):
         """Inputs always; parameters only before initialisation ends (they are fixed); outputs never."""

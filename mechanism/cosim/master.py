@@ -29,7 +29,6 @@ from dataclasses import dataclass
 from typing import Callable, Protocol, Sequence
 
 import numpy as np
-from tqdm import tqdm
 
 from mechanism.cosim.coupling import DEFAULT_SCHEME, Exchanged, make_scheme
 from mechanism.cosim.energy import ENERGY_COLUMNS, EnergyAccount
@@ -294,6 +293,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
                 scheme=loop.scheme.name if loop.scheme else "none", endpoint=getattr(endpoint, "kind", "none"))
     y = np.concatenate((q0, qd0)).astype(float)
     step, t = 0, 0.0
+    from tqdm import tqdm  # here, not at the top: SliderCrank.fmu packs this module and needs no tqdm at runtime
     bar = tqdm(total=n_steps, desc=settings.description, unit="step", disable=not settings.progress,
                mininterval=0.5, leave=False)
     try:

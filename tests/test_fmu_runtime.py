@@ -1,0 +1,249 @@
+"""The built FMUs as guests of a host process (issue 13): sealed physics, a clean sys.path/sys.modules after
+fmi2FreeInstance, errors that name their cause with logging off, an honest model description, and a run
+in a fresh virtual environment that has only fmpy (no scipy, no project)."""
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+import venv
+from pathlib import Path
+
+import pytest
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import (FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, free)
+from fmpy.validation import validate_fmu
+
+from fmu_bearing.ball_bearing import BallBearing
+from fmu_bearing.clearance_joint import ClearanceJoint
+
+ROOT = Path(__file__).resolve().parent.parent
+DISCARD, FATAL = 2, 4
+E_X = 3e-5                       # 20 um into the Table 2 bearing (P_d/2 = 10 um); 12 um into the bushing
+
+
+def expected_forces():
+    """F_x, F_y of both joints at e = (E_X, 0), v = 0, cage angle 0, from the project's own fmu_bearing."""
+    r = BallBearing().evaluate(E_X, 0.0, 0.0, 0.0, 0.0)
+    c = ClearanceJoint().evaluate(E_X, 0.0, 0.0, 0.0, 0.0)
+    return {"BallBearing": [r.F_x, r.F_y], "JournalClearance": [c.F_x, c.F_y]}
+
+
+# A host script: runs each FMU given on the command line (path, unzip folder) through fmpy: two instances,
+# fmi2Reset of one, a step at e = (E_X, 0), and reports the forces and what sys.path / sys.modules look like
+# before instantiation, while instances live, and after the last fmi2FreeInstance.
+HOST = textwrap.dedent("""
+    import importlib.util, json, sys
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+    E_X = float(sys.argv[1])
+    report = {"scipy": importlib.util.find_spec("scipy") is not None, "fmus": {}}
+    for path, unzip in zip(sys.argv[2::2], sys.argv[3::2]):
+        extract(path, unzipdir=unzip)
+        md = read_model_description(unzip)
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        path_before, modules_before = list(sys.path), set(sys.modules)
+        instances, forces = [], []
+        for k in range(2):
+            s = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,
+                          instanceName=f"i{k}")
+            s.instantiate(loggingOn=False)
+            instances.append(s)
+        instances[1].reset()                      # fmi2Reset: pythonfmu replaces the slave object
+        for s in instances:
+            s.setupExperiment(startTime=0.0); s.enterInitializationMode()
+            s.setReal([vr["e_x"]], [E_X]); s.exitInitializationMode(); s.doStep(0.0, 1e-4)
+            forces.append(s.getReal([vr["F_x"], vr["F_y"]]))
+        during = [m for m in set(sys.modules) - modules_before]
+        for s in instances:
+            s.terminate(); s.freeInstance()
+        left = {name: str(getattr(m, "__file__", None)) for name, m in sys.modules.items()
+                if name not in modules_before and str(getattr(m, "__file__", None)).startswith(unzip)}
+        report["fmus"][md.modelName] = {
+            "forces": forces, "path_restored": sys.path == path_before,
+            "private_during": sorted(m for m in during if m.split(".")[0] in json.load(
+                open(unzip + "/resources/build_options.json")).get("private_modules", [])),
+            "fmu_modules_left": left}
+    print(json.dumps(report))
+""")
+
+
+def run_host(python, fmus: dict[str, Path], tmp: Path, prelude: str = "", env_extra=None) -> dict:
+    args = [str(E_X)]
+    for name, path in fmus.items():
+        args += [str(path), str(tmp / f"unzip_{name}")]
+    script = tmp / "host.py"
+    script.write_text(prelude + HOST)
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    env.update(env_extra or {})
+    proc = subprocess.run([str(python), str(script), *args], cwd=tmp, env=env, capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def check_report(report: dict, names) -> None:
+    expected = expected_forces()
+    for name in names:
+        r = report["fmus"][name]
+        assert r["forces"] == [expected[name]] * 2, name           # bit for bit, both instances (one reset)
+        assert r["path_restored"], name
+        assert r["private_during"], name                            # the FMU did import its private modules ...
+        assert r["fmu_modules_left"] == {}, name                    # ... and none is left after the last free
+
+
+@pytest.fixture(scope="module")
+def fmus(ball_bearing_fmu, journal_clearance_fmu):
+    return {"BallBearing": ball_bearing_fmu, "JournalClearance": journal_clearance_fmu}
+
+
+def test_host_with_a_doctored_fmu_bearing_gets_the_fmus_own_physics(fmus, tmp_path):
+    """A host that imported another ``fmu_bearing`` (and pythonfmu) first: the FMUs use their packed copies."""
+    doctored = tmp_path / "doctored"
+    shutil.copytree(ROOT / "fmu_bearing", doctored / "fmu_bearing", ignore=shutil.ignore_patterns("__pycache__"))
+    with open(doctored / "fmu_bearing" / "ball_bearing.py", "a") as fh:
+        fh.write("\n_init = BallBearing.__init__\n"
+                 "def _doubled(self, *a, **k):\n    _init(self, *a, **k)\n    self.stiffness *= 2.0\n"
+                 "BallBearing.__init__ = _doubled\n")
+    with open(doctored / "fmu_bearing" / "clearance_joint.py", "a") as fh:
+        fh.write("\n_init = ClearanceJoint.__init__\n"
+                 "def _doubled(self, *a, **k):\n    _init(self, *a, **k)\n    self.stiffness *= 2.0\n"
+                 "ClearanceJoint.__init__ = _doubled\n")
+    prelude = textwrap.dedent(f"""
+        import sys
+        sys.path.insert(0, {str(doctored)!r})
+        import fmu_bearing.ball_bearing, fmu_bearing.clearance_joint, pythonfmu
+        assert fmu_bearing.__file__.startswith({str(doctored)!r})
+        _K = fmu_bearing.ball_bearing.BallBearing().stiffness
+        print("doctored K", _K)
+    """)
+    report = run_host(sys.executable, fmus, tmp_path, prelude)
+    check_report(report, fmus)
+    # the host's copy really is the doctored one: the FMU's force is half what it would give
+    doctored_force = expected_forces()["BallBearing"][0] * 2.0
+    assert report["fmus"]["BallBearing"]["forces"][0][0] == pytest.approx(doctored_force / 2.0, rel=1e-15)
+
+
+def _fmpy_venv(cache_dir: Path) -> Path:
+    """A plain virtual environment (no system site-packages) with only ``pip install fmpy``, cached."""
+    python = cache_dir / "bin" / "python"
+    if python.is_file() and (cache_dir / "ok").is_file():
+        return python
+    shutil.rmtree(cache_dir, ignore_errors=True)
+    venv.EnvBuilder(with_pip=True, system_site_packages=False, clear=True).create(cache_dir)
+    proc = subprocess.run([str(python), "-m", "pip", "install", "--quiet", "fmpy"], capture_output=True, text=True,
+                          timeout=900)
+    if proc.returncode != 0:
+        pytest.skip(f"pip install fmpy failed in a fresh venv (no index reachable?): {proc.stderr[-500:]}")
+    (cache_dir / "ok").write_text("fmpy\n")
+    return python
+
+
+def test_fmus_run_in_a_venv_with_only_fmpy(fmus, tmp_path, request):
+    """BallBearing and JournalClearance in a fresh venv with nothing but fmpy and its dependencies (numpy,
+    no scipy, not this project): the same force, bit for bit, as the project's force law in this process.
+    The venv is created once and kept in pytest's cache (about 15 s with local wheels)."""
+    cache = Path(request.config.cache.mkdir(f"fmpy-only-venv-py{sys.version_info[0]}{sys.version_info[1]}"))
+    python = _fmpy_venv(cache)
+    report = run_host(python, fmus, tmp_path)
+    assert report["scipy"] is False
+    check_report(report, fmus)
+
+
+# --- errors: a cause, a category, also with logging off ----------------------------------------------
+
+class Host:
+    """FMU2Slave with a logger callback that records (status, category, message)."""
+
+    def __init__(self, path: Path, unzip: Path, logging_on: bool):
+        extract(str(path), unzipdir=str(unzip))
+        self.md = read_model_description(str(unzip))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.messages = []
+        self.callbacks = fmi2CallbackFunctions()
+        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self.s = FMU2Slave(guid=self.md.guid, unzipDirectory=str(unzip),
+                           modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="guest")
+        self.s.instantiate(callbacks=self.callbacks, loggingOn=logging_on)
+        self.s.setupExperiment(startTime=0.0)
+        self.s.enterInitializationMode()
+
+    def _log(self, env, instance, status, category, message):
+        self.messages.append((status, category and category.decode(), message.decode("utf-8", "replace")))
+
+
+@pytest.mark.parametrize("logging_on", [False, True])
+def test_failed_initialisation_names_its_cause_with_a_category(ball_bearing_fmu, tmp_path, logging_on):
+    host = Host(ball_bearing_fmu, tmp_path / "x", logging_on)
+    host.s.setInteger([host.vr["n_balls"]], [2])
+    with pytest.raises(FMICallException):
+        host.s.exitInitializationMode()
+    host.s.freeInstance()
+    errors = [(c, m) for s, c, m in host.messages if s >= 3]
+    assert ("logStatusError", "initialisation failed: invalid parameter n_balls = 2: "
+            "a ball bearing needs at least 3 balls") in errors
+    assert not any("unknown error" in m for _, m in errors)
+    if not logging_on:                          # nothing but the error reaches a host that switched logging off
+        assert len(host.messages) == 1
+
+
+@pytest.mark.parametrize("name", ["BallBearing", "JournalClearance"])
+def test_do_step_after_terminate_is_refused(fmus, tmp_path, name):
+    host = Host(fmus[name], tmp_path / "x", logging_on=False)
+    host.s.setReal([host.vr["e_x"]], [E_X])
+    host.s.exitInitializationMode()
+    host.s.doStep(0.0, 1e-4)
+    host.s.terminate()
+    with pytest.raises(FMICallException) as err:
+        host.s.doStep(1e-4, 1e-4)
+    assert err.value.status == DISCARD
+    assert [(c, "fmi2Terminate" in m) for s, c, m in host.messages] == [("logStatusError", True)]
+    host.s.freeInstance()
+
+
+# --- model description ---------------------------------------------------------------------------------
+
+def test_all_fmus_validate_and_declare_outputs_calculated(fmus, slider_crank_fmu):
+    for path in [*fmus.values(), slider_crank_fmu]:
+        assert validate_fmu(str(path)) == [], path.name
+        md = read_model_description(str(path))
+        outputs = [v for v in md.modelVariables if v.causality == "output"]
+        assert outputs and all(v.initial == "calculated" and v.start is None for v in outputs), path.name
+        assert [u.variable for u in md.initialUnknowns] == outputs, path.name
+
+
+def test_slider_crank_fmu_runs_without_tqdm(slider_crank_fmu, tmp_path):
+    """SliderCrank.fmu packs ``mechanism`` (which needs numpy and scipy) but not tqdm: a host without tqdm runs it."""
+    script = textwrap.dedent(f"""
+        import math, sys
+        class Block:
+            def find_spec(self, name, path=None, target=None):
+                if name.split(".")[0] == "tqdm":
+                    raise ImportError("no tqdm in this host")
+        sys.meta_path.insert(0, Block())
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+        d = extract({str(slider_crank_fmu)!r}, unzipdir={str(tmp_path / "x")!r})
+        md = read_model_description(d)
+        vr = {{v.name: v.valueReference for v in md.modelVariables}}
+        s = FMU2Slave(guid=md.guid, unzipDirectory=d, modelIdentifier="SliderCrank", instanceName="crank")
+        s.instantiate(); s.setupExperiment(startTime=0.0); s.enterInitializationMode(); s.exitInitializationMode()
+        for k in range(10):
+            s.doStep(k * 1e-5, 1e-5)
+        x = s.getReal([vr["slider_x"]])[0]
+        s.terminate(); s.freeInstance()
+        assert "tqdm" not in sys.modules and math.isfinite(x)
+        print(x)
+    """)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    proc = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
