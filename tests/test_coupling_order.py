@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mechanism.cosim.energy import energy_summary
+from mechanism.cosim.record import energy_summary
 from mechanism.output.results import summary
 from mechanism.run import RunConfig, run, run_adaptive
 
@@ -124,4 +124,4 @@ def test_summary_json_has_the_energy_account():
     r = _cosim("jacobian-drift", 1e-5, revs=0.05)
     s = summary(r)
     assert s["energy"]["damping_dissipation_J"] > 0
-    assert set(("energy_residual", "drive_work", "contact_energy", "cage_work")) <= set(r.columns)
+    assert {"energy_residual", "drive_work", "contact_energy", "cage_work"} <= set(r.columns)

@@ -95,16 +95,3 @@ class EnergyAccount:
                 "cage_work": cage_work, "applied_work": applied,
                 "energy_residual": kinetic + potential + dissipated - drive - applied - cage_work - self._start}
 
-
-def energy_summary(r) -> dict | None:
-    """End-of-run energy figures of a RunResult with the account's columns (None without them) [J]."""
-    if not r.has("energy_residual") or len(r["time"]) == 0:
-        return None
-    residual = r["energy_residual"]
-    dissipated = float(r["damping_dissipation"][-1])
-    worst = float(residual[np.nanargmax(np.abs(residual))])
-    return {"kinetic_energy_J": float(r["kinetic_energy"][-1]), "contact_energy_J": float(r["contact_energy"][-1]),
-            "damping_dissipation_J": dissipated, "drive_work_J": float(r["drive_work"][-1]),
-            "cage_work_J": float(r["cage_work"][-1]), "applied_work_J": float(r["applied_work"][-1]),
-            "energy_residual_J": float(residual[-1]), "energy_residual_max_abs_J": abs(worst),
-            "energy_residual_rel_dissipation": float(residual[-1]) / dissipated if dissipated > 0 else None}

@@ -74,3 +74,17 @@ class RunResult:
     @property
     def ok(self) -> bool:
         return self.status == "completed"
+
+
+def energy_summary(r: RunResult) -> dict | None:
+    """End-of-run energy figures of a RunResult with the energy account's columns (None without them) [J]."""
+    if not r.has("energy_residual") or len(r["time"]) == 0:
+        return None
+    residual = r["energy_residual"]
+    dissipated = float(r["damping_dissipation"][-1])
+    worst = float(residual[np.nanargmax(np.abs(residual))])
+    return {"kinetic_energy_J": float(r["kinetic_energy"][-1]), "contact_energy_J": float(r["contact_energy"][-1]),
+            "damping_dissipation_J": dissipated, "drive_work_J": float(r["drive_work"][-1]),
+            "cage_work_J": float(r["cage_work"][-1]), "applied_work_J": float(r["applied_work"][-1]),
+            "energy_residual_J": float(residual[-1]), "energy_residual_max_abs_J": abs(worst),
+            "energy_residual_rel_dissipation": float(residual[-1]) / dissipated if dissipated > 0 else None}

@@ -11,8 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cosim.energy import energy_summary
-from ..cosim.record import RunResult, unit_of
+from ..cosim.record import RunResult, energy_summary, unit_of
 
 
 def _figures(r: RunResult, mask: np.ndarray) -> dict:
