@@ -23,6 +23,44 @@ def _cosim(scheme, step, revs=0.1, mode="inprocess", **kw):
     return r
 
 
+def _order(steps, errors) -> float:
+    """Least-squares slope of log(error) against log(step)."""
+    return float(np.polyfit(np.log(steps), np.log(errors), 1)[0])
+
+
+@pytest.fixture(scope="module")
+def reference_fifth():
+    """Monolithic reference, 0.2 revolution (10 ms, the start-up impacts) at 1200 rpm, rtol 1e-11."""
+    r = run(RunConfig(mode="monolithic", revs=0.2, rtol=1e-11, progress=False, settings=DAMPING))
+    assert r.ok, r.message
+    return r
+
+
+def test_default_scheme_is_second_order_through_the_start_up(reference_fifth):
+    """Issue 12 item 5, on the first 0.2 revolution at 1200 rpm (start-up impacts and contact onsets
+    included), steps 2e-5 ... 2.5e-6 s: observed order >= 1.8 of the default scheme on the cage angle
+    and on the peak joint force of the second half of the window, against the monolithic reference.
+    (The issue's window is the second revolution; measured there by docs/coupling.md's command:
+    order 1.94 on the cage angle and 1.82 on the rev-2 peak force, second order down to 5e-6 s and a
+    floor of about 1e-4 of the peak below it.)"""
+    from mechanism.cosim.coupling import DEFAULT_SCHEME
+    assert DEFAULT_SCHEME == "jacobian-implicit"
+    ref = reference_fifth
+    t_ref = ref["time"]
+    half = t_ref >= 0.5 * t_ref[-1]
+    ref_peak = float(np.max(np.hypot(ref["F_x"], ref["F_y"])[half]))
+    steps, cage, peak = [2e-5, 1e-5, 5e-6, 2.5e-6], [], []
+    for h in steps:
+        r = _cosim(DEFAULT_SCHEME, h, revs=0.2)
+        idx = np.rint(r["time"] / 1e-5).astype(int)          # h = 2e-5 samples every step
+        cage.append(float(np.max(np.abs(r["cage_angle"] - ref["cage_angle"][idx]))))
+        sel = half[idx]
+        peak.append(abs(float(np.max(np.hypot(r["F_x"], r["F_y"])[sel])) / ref_peak - 1.0))
+    print(f"cage errors {cage} order {_order(steps, cage):.2f}; peak errors {peak} order {_order(steps, peak):.2f}")
+    assert _order(steps, cage) >= 1.8, cage
+    assert _order(steps, peak) >= 1.8, peak
+
+
 @pytest.fixture(scope="module")
 def reference_short():
     """Monolithic reference, 0.1 revolution at 1200 rpm, rtol 1e-11."""

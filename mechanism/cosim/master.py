@@ -31,6 +31,7 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 
 from mechanism.cosim.coupling import DEFAULT_SCHEME, Exchanged, make_scheme
+from mechanism.cosim.coupling.implicit import onset_jumps
 from mechanism.cosim.energy import ENERGY_COLUMNS, EnergyAccount
 from mechanism.cosim.joint import BearingLink
 from mechanism.cosim.record import BASE_COLUMNS, Recorder, RunResult
@@ -203,12 +204,17 @@ class CouplingLoop:
         if scheme is None or not scheme.iterative:
             return self.advance(y, t0, h, step, t)
         stats, limit = self.iterations, max(2, self.settings.max_iterations)
+        energy, n = self.energy, self.n
+        start = scheme.past[-1]
+        cage_start = energy.cage_angle(y[:n]) if energy is not None else 0.0
         snap = self.snapshot()
         previous = None
         try:
             for passes in range(1, limit + 1):
                 y_end = self.advance(y, t0, h, step, t)
                 end = scheme.past[-1]
+                jumps = () if energy is None else onset_jumps(energy.bearing, start, cage_start, end,
+                                                              energy.cage_angle(y_end[:n]))
                 if previous is not None and scheme.converged(
                         previous, end, self.settings.iteration_tol, max(1e-6, math.hypot(end.e_x, end.e_y))):
                     break
@@ -217,7 +223,7 @@ class CouplingLoop:
                     break
                 previous = end
                 self.restore(snap)
-                scheme.set_trial(end)
+                scheme.set_trial(end, jumps)
         finally:
             scheme.set_trial(None)
             self.release(snap)

@@ -58,7 +58,7 @@ SCHEMES: dict[str, type[Scheme]] = {cls.name: cls for cls in (
     InterfaceJacobianDrift, InterfaceJacobian, InterfaceJacobianSecant, InterfaceJacobianImplicit,
     ZeroOrderHold, ZeroOrderHoldJacobi, LinearExtrapolation,
     QuadraticExtrapolation)}
-DEFAULT_SCHEME = InterfaceJacobianDrift.name
+DEFAULT_SCHEME = InterfaceJacobianImplicit.name
 
 
 def make_scheme(name: str) -> Scheme:
