@@ -108,7 +108,7 @@ class StudyConfig:
     rpms: list[float] = field(default_factory=lambda: [1200.0])
     balls: list[int | None] = field(default_factory=lambda: [None])
     settings: list[dict] = field(default_factory=lambda: [{}])
-    schemes: list[str] = field(default_factory=lambda: ["jacobian-drift", "jacobian", "extrap1", "zoh"])
+    schemes: list[str] = field(default_factory=lambda: ["jacobian-implicit", "jacobian-drift", "jacobian", "extrap1", "zoh"])
     steps: list[float] = field(default_factory=lambda: parse_grid(DEFAULT_STEPS))
     tols: list[float] = field(default_factory=lambda: parse_grid(DEFAULT_TOLS))
     revs: float = 2.0
