@@ -94,9 +94,9 @@ def run_monolithic(system: System, link: BearingLink, bearing: BallBearing, q0: 
                mininterval=0.5)
     k = 0
     try:
-        def start(t0, y):
+        def start(t0, y, first_step=None):
             return METHODS[method](rhs, t0, y, float(times[-1]), rtol=rtol, atol=tolerances(system, rtol),
-                                   max_step=output_interval * 10)
+                                   max_step=output_interval * 10, first_step=first_step)
 
         def zone(y):
             ex, ey = link.inputs(y[:n], y[n:2 * n])[:2]
@@ -133,7 +133,10 @@ def run_monolithic(system: System, link: BearingLink, bearing: BallBearing, q0: 
                 y_ev = dense(t_stop)
                 loaded[restart] = not loaded[restart]
                 counter["events"] += 1
-                solver = start(t_stop, y_ev)
+                # restart with the last step size (at most the remaining span): an automatic first step
+                # can probe states far outside the clearance, which the force law refuses
+                previous = max(solver.t - solver.t_old, 1e-12)
+                solver = start(t_stop, y_ev, min(previous, float(times[-1]) - t_stop))
             else:
                 loaded = now
             pct = int(100 * solver.t / times[-1])
