@@ -39,6 +39,8 @@ except ImportError:  # running from a source tree that is not installed
     sys.path.insert(0, str(ROOT))
     import fmu_bearing
 
+from fmu_bearing.native.build import SOURCE as LOADER_SOURCE, build_loader  # noqa: E402
+
 PACKAGE = Path(fmu_bearing.__file__).resolve().parent
 SLAVES = PACKAGE / "slaves"
 DOC = ROOT / "docs" / "fmu-interface.md"
@@ -46,6 +48,9 @@ DEFAULT_MAX_BALLS = 20
 BUILD_OPTIONS_FILE = "build_options.json"
 #: FMI capability flags of our FMUs (pythonfmu's get/set and serialize state are implemented)
 STATE_OPTIONS = {"canGetAndSetFMUstate": True, "canSerializeFMUstate": True}
+#: the same for FMI 3.0 (pythonfmu3; its default for variable step sizes is wrong, so it is set explicitly)
+STATE_OPTIONS_FMI3 = {"canGetAndSetFMUState": True, "canSerializeFMUState": True,
+                      "canHandleVariableCommunicationStepSize": True}
 
 
 class FmuSpec(NamedTuple):
@@ -56,11 +61,13 @@ class FmuSpec(NamedTuple):
     options: dict  # FMI capability flags for FmuBuilder.build_FMU
     packages: tuple[str, ...] = ("fmu_bearing",)  # packed into resources/ so the FMU runs stand-alone
     doc: Path = DOC  # packed as the FMU's documentation
+    fmi: int = 2  # FMI version: 2 builds with pythonfmu, 3 with pythonfmu3
 
 
 REGISTRY: list[FmuSpec] = [
     FmuSpec(SLAVES / "ball_bearing_fmu.py", "BallBearing", dict(STATE_OPTIONS)),
     FmuSpec(SLAVES / "journal_clearance_fmu.py", "JournalClearance", dict(STATE_OPTIONS)),
+    FmuSpec(SLAVES / "ball_bearing_fmu3.py", "BallBearing3", dict(STATE_OPTIONS_FMI3), fmi=3),
     FmuSpec(ROOT / "mechanism" / "ssp" / "slaves" / "slider_crank_fmu.py", "SliderCrank", dict(STATE_OPTIONS),
             ("fmu_bearing", "mechanism"), ROOT / "docs" / "ssp.md"),
 ]
@@ -81,6 +88,7 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
     An entry whose slave script does not exist yet is skipped with a message.
     """
     from pythonfmu import FmuBuilder
+    from pythonfmu3 import FmuBuilder as Fmu3Builder
 
     if int(max_balls) != max_balls or max_balls < 3:
         raise ValueError(f"max_balls = {max_balls!r} must be an integer >= 3")
@@ -104,7 +112,7 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
             project_files = []
             for package in spec.packages:
                 shutil.copytree(package_dir(package), stage / package,
-                                ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo", "*.fmu"))
+                                ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo", "*.fmu", "native"))
                 project_files.append(stage / package)
             options_file = stage / BUILD_OPTIONS_FILE
             options_file.write_text(json.dumps({"max_balls": int(max_balls), "sources_sha256": source_digest(spec)})
@@ -116,12 +124,14 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
                 shutil.copy2(spec.doc, doc_dir / spec.doc.name)
             # Build into the staging folder, then move: readers of out_dir never see a half-written FMU.
             try:
-                fmu = FmuBuilder.build_FMU(spec.script, dest=stage / f"{spec.name}.fmu",
+                builder = Fmu3Builder if spec.fmi == 3 else FmuBuilder
+                fmu = builder.build_FMU(spec.script, dest=stage / f"{spec.name}.fmu",
                                            project_files=[*project_files, options_file],
                                            documentation_folder=doc_dir, **spec.options)
             finally:
                 sys.path[:] = saved_path  # pythonfmu leaves the script's folder on sys.path
             seal(fmu, max_balls)
+            build_loader(fmu)  # native hosts: the loader becomes the FMU's binary (fmu_bearing/native)
             model_name = _model_name(fmu)
             if model_name != spec.name:
                 raise RuntimeError(f"{spec.script} defines model {model_name!r}, expected {spec.name!r}")
@@ -205,7 +215,7 @@ def seal(fmu: Path, max_balls: int) -> dict[str, str]:
 
 def _sources(spec: FmuSpec) -> list[Path]:
     """Files an FMU is built from: its packages (incl. the slave scripts), its script, this build script."""
-    files = [spec.script, Path(__file__)]
+    files = [spec.script, Path(__file__), LOADER_SOURCE]
     for package in spec.packages:
         files += package_dir(package).rglob("*.py")
     return files

@@ -1,8 +1,9 @@
 """Cost of one co-simulation exchange with the BallBearing FMU against the in-process force law.
 
-    python benchmarks/fmu_step.py [--fmu dist/BallBearing.fmu] [--calls 3000] [--repeat 7]
+    python benchmarks/fmu_step.py [--fmu dist/BallBearing.fmu] [--calls 3000] [--repeat 7] [--no-native]
 
-Targets on the development machine: in-process evaluate <= 10 us for 8 balls, exchange <= 25 us.
+Targets on the development machine: in-process evaluate <= 10 us for 8 balls, exchange <= 25 us;
+issue 13: native-host cycle <= 10 us, fmpy cycle (prebuilt arrays) <= 7.5 us.
 
 One exchange = setReal of the 6 inputs in one call, doStep, getReal of F_x and F_y in one call,
 through fmpy's FMU2Slave. Measured three ways: fmpy's convenience methods (which build ctypes arrays
@@ -10,6 +11,11 @@ per call), fmpy's fmi2* wrappers with prebuilt ctypes arrays (what the master do
 ctypes function pointers (no fmpy wrapper). The breakdown times each call alone and the slave's own
 Python code called directly, so the rest is pythonfmu's C++ layer plus ctypes. Every figure is the
 median over ``--repeat`` runs of ``--calls`` calls, in microseconds per call.
+
+The native-host cycle is the same exchange from the C host ``fmu_bearing/native/host.c`` (a separate,
+non-Python process, clean environment; timed inside the host), through the FMU's loader; and, for
+comparison, through pythonfmu's binary alone with libpython preloaded (how a native host had to run the
+FMU before issue 13). Each of the ``--repeat`` host runs makes ``--calls`` cycles.
 """
 from __future__ import annotations
 
@@ -30,6 +36,7 @@ from fmu_bearing.parameters import BearingParameters  # noqa: E402
 
 INPUTS = ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")
 TARGET_IN_PROCESS_US, TARGET_EXCHANGE_US = 10.0, 25.0
+TARGET_NATIVE_US, TARGET_FMPY_US = 10.0, 7.5
 
 
 def states(n=64):
@@ -53,6 +60,36 @@ def medians_us(benchmarks: dict, calls: int, repeat: int) -> dict:
     return {name: statistics.median(times) for name, times in runs.items()}
 
 
+def native_cycles(fmu_path: Path, tmp: Path, calls: int, repeat: int) -> dict:
+    """Median set/step/get cycle [us] in the native C host: through the loader (clean environment), and
+    through pythonfmu's binary alone with libpython preloaded (skipped if this Python has no shared one)."""
+    import sysconfig
+    import zipfile
+
+    from fmu_bearing.native.host import clean_env, compile_host, run_host
+    host = compile_host(tmp)
+    loader_dir, plain_dir = tmp / "native_loader", tmp / "native_pythonfmu"
+    for folder in (loader_dir, plain_dir):
+        with zipfile.ZipFile(fmu_path) as z:
+            z.extractall(folder)
+    binaries = plain_dir / "binaries" / "linux64"
+    plain = list(binaries.glob("*_pythonfmu.so"))
+    for original in plain:
+        original.replace(binaries / original.name.replace("_pythonfmu", ""))
+    libpython = Path(sysconfig.get_config_var("LIBDIR") or "") / (sysconfig.get_config_var("INSTSONAME") or "-")
+    cases = {"exchange, native C host through the loader": (loader_dir, clean_env())}
+    if plain and libpython.is_file():
+        cases["exchange, native C host, pythonfmu binary + LD_PRELOAD"] = (plain_dir, clean_env(LD_PRELOAD=str(libpython)))
+    runs = {name: [] for name in cases}
+    for _ in range(repeat):
+        for name, (folder, env) in cases.items():
+            run = run_host(host, folder, 1, calls, "seq", env=env)
+            if run.returncode != 0 or run.cycle_us is None:
+                raise RuntimeError(f"{name}: host failed ({run.returncode}): {run.stderr[-2000:]}")
+            runs[name].append(run.cycle_us)
+    return {name: statistics.median(times) for name, times in runs.items()}
+
+
 def find_fmu(path: str | None, tmp: Path) -> Path:
     """The FMU to measure: ``path``, or a fresh build of the current sources (never a stale dist/)."""
     if path:
@@ -66,6 +103,7 @@ def main(argv=None) -> int:
     parser.add_argument("--fmu", help="FMU to measure (default: a fresh build of the current sources)")
     parser.add_argument("--calls", type=int, default=3000)
     parser.add_argument("--repeat", type=int, default=7)
+    parser.add_argument("--no-native", action="store_true", help="skip the native-host cycle (needs ziglang)")
     args = parser.parse_args(argv)
 
     from fmpy import extract, read_model_description
@@ -100,6 +138,29 @@ def main(argv=None) -> int:
         raw_get.argtypes = raw_set.argtypes
         raw_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
         raw_set.restype = raw_step.restype = raw_get.restype = ctypes.c_int
+
+        # The same FMU with pythonfmu's binary alone behind fmpy (no loader): what the loader costs a Python host.
+        plain_dir = Path(extract(str(fmu_path), unzipdir=str(Path(tmp) / "x_plain")))
+        plain_bins = plain_dir / "binaries" / "linux64"
+        plain_fmu = None
+        for original in plain_bins.glob("*_pythonfmu.so"):
+            original.replace(plain_bins / original.name.replace("_pythonfmu", ""))
+            plain_fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(plain_dir),
+                                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bench_plain")
+            plain_fmu.instantiate(loggingOn=False)
+            plain_fmu.setupExperiment(startTime=0.0)
+            plain_fmu.enterInitializationMode()
+            plain_fmu.exitInitializationMode()
+
+        def fmpy_prebuilt_plain(n):
+            p_set, p_step, p_get, p_comp = (plain_fmu.fmi2SetReal, plain_fmu.fmi2DoStep, plain_fmu.fmi2GetReal,
+                                            plain_fmu.component)
+            for i in range(n):
+                val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
+                p_set(p_comp, vr_in, 6, val_in)
+                p_step(p_comp, i * h, h, 1)
+                p_get(p_comp, vr_out, 2, val_out)
+                val_out[0], val_out[1]
 
         def fmpy_convenience(n):
             for i in range(n):
@@ -158,9 +219,12 @@ def main(argv=None) -> int:
             return evaluate
 
         c, r = args.calls, args.repeat
+        plain = {"exchange, fmpy fmi2* prebuilt, pythonfmu binary alone (no loader)": fmpy_prebuilt_plain} \
+            if plain_fmu is not None else {}
         results = medians_us({
             "exchange, fmpy setReal/doStep/getReal": fmpy_convenience,
             "exchange, fmpy fmi2* with prebuilt ctypes arrays": fmpy_prebuilt,
+            **plain,
             "exchange, raw ctypes function pointers": raw_ctypes,
             "  of which fmi2SetReal (6 values)": only_set,
             "  of which fmi2DoStep": only_step,
@@ -171,6 +235,11 @@ def main(argv=None) -> int:
         }, c, r)
         fmu.terminate()
         fmu.freeInstance()
+        if plain_fmu is not None:
+            plain_fmu.terminate()
+            plain_fmu.freeInstance()
+        if not args.no_native:
+            results.update(native_cycles(fmu_path, Path(tmp), c, r))
 
     width = max(map(len, results))
     print(f"BallBearing FMU exchange vs in-process force law ({fmu_path.name}; median of {r} x {c} calls)")
@@ -179,6 +248,14 @@ def main(argv=None) -> int:
     exchange = results["exchange, fmpy fmi2* with prebuilt ctypes arrays"]
     in_process = results["in-process evaluate, 8 balls"]
     print(f"  ratio exchange (prebuilt arrays) / in-process evaluate (8 balls): {exchange / in_process:.1f}")
+    native = results.get("exchange, native C host through the loader")
+    if native is not None:
+        before = results.get("exchange, native C host, pythonfmu binary + LD_PRELOAD")
+        print(f"  ratio native host / fmpy (prebuilt arrays): {native / exchange:.2f}"
+              + (f"; pythonfmu binary alone / loader (native host): {before / native:.1f}" if before else ""))
+        print(f"  issue 13 targets: native <= {TARGET_NATIVE_US:g} us "
+              f"({'met' if native <= TARGET_NATIVE_US else 'MISSED'}), fmpy <= {TARGET_FMPY_US:g} us "
+              f"({'met' if exchange <= TARGET_FMPY_US else 'MISSED'})")
     print(f"  targets: in-process <= {TARGET_IN_PROCESS_US:g} us for 8 balls "
           f"({'met' if in_process <= TARGET_IN_PROCESS_US else 'MISSED'}), exchange <= {TARGET_EXCHANGE_US:g} us "
           f"({'met' if exchange <= TARGET_EXCHANGE_US else 'MISSED'})")

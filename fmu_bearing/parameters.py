@@ -13,6 +13,9 @@ DAMPING_NONE, DAMPING_CONSTANT, DAMPING_OIL_FILM = 0, 1, 2
 
 #: tolerance on d_i = d_m - D and d_o = d_m + D, as a fraction of the ball diameter
 RACEWAY_TOLERANCE = 0.01
+#: most negative radial clearance (preload) accepted, as a fraction of the ball diameter: P_d >= -1 % D
+#: (a preload deflection of 0.5 % D per ball, about 3 kN per ball for Table 2, far beyond any fit)
+MAX_PRELOAD_FRACTION = 0.01
 
 
 class BearingParameterError(ValueError):
@@ -46,7 +49,8 @@ class BearingParameters:
     outer_race_diameter: float = _param(46.6e-3, "m", "outer raceway diameter d_o (= d_m + D within 1 % of D)")
     bore_diameter: float = _param(24e-3, "m", "bore diameter (catalogue data, informative)")
     outside_diameter: float = _param(52e-3, "m", "outside diameter (catalogue data, informative)")
-    radial_clearance: float = _param(0.02e-3, "m", "radial (diametral) internal clearance P_d")
+    radial_clearance: float = _param(0.02e-3, "m", "radial (diametral) internal clearance P_d; "
+                                     "negative = preload (at least -1 % of ball_diameter)")
     youngs_modulus: float = _param(207e9, "Pa", "Young's modulus E of balls and rings")
     poisson_ratio: float = _param(0.3, "1", "Poisson's ratio nu of balls and rings, in (0, 0.5)")
     inner_groove_conformity: float = _param(0.52, "1", "inner groove radius / ball diameter f_i (> 0.5)")
@@ -61,6 +65,8 @@ class BearingParameters:
     eccentricity_limit: float = _param(0.0, "m", "|e| beyond this is divergence (error); 0 = 5 % of ball_diameter")
     allow_ball_overlap: bool = _param(False, "", "accept ball counts that do not fit on the pitch circle "
                                               "(the paper's hypothetical 15- and 20-ball studies)")
+    reliability_factor: float = _param(1.0, "1", "life modification factor a1 for reliability (ISO 281 "
+                                               "Table 12): 1 = 90 %, 0.64 = 95 %, 0.25 = 99 %; in (0, 1]")
 
     def replace(self, **changes) -> "BearingParameters":
         return replace(self, **changes)
@@ -74,6 +80,31 @@ class BearingParameters:
         return self.eccentricity_limit if self.eccentricity_limit > 0 else 0.05 * self.ball_diameter
 
 
+#: documented physical range [min, max] of each number (poisson_ratio: (0, 0.5), checked in ``validate``) (SI; docs/robustness.md): far beyond any real
+#: ball bearing, so that only absurd values (a stiffness of 1e300) are refused.
+RANGES = {
+    "n_balls": (3, 1000),
+    "ball_diameter": (1e-4, 1.0),
+    "pitch_diameter": (1e-4, 10.0),
+    "inner_race_diameter": (0.0, 10.0),
+    "outer_race_diameter": (1e-4, 10.0),
+    "bore_diameter": (0.0, 10.0),
+    "outside_diameter": (0.0, 10.0),
+    "radial_clearance": (0.0, 1e-2),
+    "youngs_modulus": (1e6, 1e13),
+    "inner_groove_conformity": (-math.inf, 10.0),     # > 0.5: checked below with its reason
+    "outer_groove_conformity": (-math.inf, 10.0),
+    "damping_model": (0, 2),
+    "damping_coefficient": (0.0, 1e8),
+    "oil_viscosity": (0.0, 1e3),
+    "pressure_viscosity_coefficient": (0.0, 1e-6),
+    "min_film_thickness": (0.0, 1e-3),
+    "cage_angle_start": (-1e6, 1e6),
+    "contact_stiffness": (0.0, 1e14),
+    "eccentricity_limit": (0.0, 1.0),
+}
+
+
 def validate(p: BearingParameters, capacity: int | None = None) -> None:
     """Raise BearingParameterError naming the first invalid parameter of ``p``.
 
@@ -83,11 +114,18 @@ def validate(p: BearingParameters, capacity: int | None = None) -> None:
         v = getattr(p, f.name)
         if isinstance(v, float) and not math.isfinite(v):
             raise BearingParameterError(f.name, v, "must be a finite number")
-    if int(p.n_balls) != p.n_balls or p.n_balls < 3:
+        if f.type in ("int", int) and (isinstance(v, bool) or not isinstance(v, int)):
+            raise BearingParameterError(f.name, v, "must be an integer")
+        lo, hi = RANGES.get(f.name, (-math.inf, math.inf))
+        if not isinstance(v, bool) and not lo <= v <= hi:
+            unit = f.metadata.get("unit", "").strip("1")
+            raise BearingParameterError(f.name, v, f"outside its range [{lo:g}, {hi:g}] {unit}".rstrip())
+    if p.n_balls < 3:
         raise BearingParameterError("n_balls", p.n_balls, "a ball bearing needs at least 3 balls")
     if capacity is not None and p.n_balls > capacity:
         raise BearingParameterError("n_balls", p.n_balls,
-                                    f"exceeds the FMU's capacity of {capacity} balls (rebuild with --max-balls)")
+                                    f"exceeds the FMU's capacity of {capacity} balls (build one with "
+                                    f"`python build_fmu.py --max-balls {p.n_balls}` and pass it with --fmu)")
     for name in ("ball_diameter", "pitch_diameter"):
         if getattr(p, name) <= 0:
             raise BearingParameterError(name, getattr(p, name), "must be positive")
@@ -109,8 +147,10 @@ def validate(p: BearingParameters, capacity: int | None = None) -> None:
     if abs(p.outer_race_diameter - (dm + D)) > tol:
         raise BearingParameterError("outer_race_diameter", p.outer_race_diameter,
                                     f"inconsistent with pitch_diameter + ball_diameter = {dm + D:.6g} m")
-    if p.radial_clearance < 0:
-        raise BearingParameterError("radial_clearance", p.radial_clearance, "must not be negative")
+    if p.radial_clearance < -MAX_PRELOAD_FRACTION * D:  # negative clearance = preload (docs/bearing-life.md)
+        raise BearingParameterError("radial_clearance", p.radial_clearance,
+                                    f"a preload beyond -{MAX_PRELOAD_FRACTION:g} x ball_diameter = "
+                                    f"{-MAX_PRELOAD_FRACTION * D:.6g} m is outside the model's range")
     if p.youngs_modulus <= 0:
         raise BearingParameterError("youngs_modulus", p.youngs_modulus, "must be positive")
     if not 0.0 < p.poisson_ratio < 0.5:
@@ -119,6 +159,8 @@ def validate(p: BearingParameters, capacity: int | None = None) -> None:
         if getattr(p, name) <= 0.5:
             raise BearingParameterError(name, getattr(p, name),
                                         "must exceed 0.5 (the groove radius must exceed the ball radius)")
+    if not 0.0 < p.reliability_factor <= 1.0:
+        raise BearingParameterError("reliability_factor", p.reliability_factor, "must lie in (0, 1] (ISO 281 a1)")
     if p.damping_model not in (DAMPING_NONE, DAMPING_CONSTANT, DAMPING_OIL_FILM):
         raise BearingParameterError("damping_model", p.damping_model, "must be 0 (none), 1 (constant) or 2 (oil film)")
     for name in ("damping_coefficient", "oil_viscosity", "pressure_viscosity_coefficient",
@@ -129,7 +171,7 @@ def validate(p: BearingParameters, capacity: int | None = None) -> None:
         for name in ("oil_viscosity", "pressure_viscosity_coefficient", "min_film_thickness"):
             if getattr(p, name) <= 0:
                 raise BearingParameterError(name, getattr(p, name), "must be positive for the oil-film damping model")
-    if p.effective_eccentricity_limit <= p.radial_clearance / 2:
+    if p.effective_eccentricity_limit <= max(p.radial_clearance, 0.0) / 2:  # preload: any positive limit
         raise BearingParameterError("eccentricity_limit", p.eccentricity_limit,
                                     "must exceed half the radial clearance")
 

@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import sys
+import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -47,38 +50,72 @@ def config_from_args(args) -> "RunConfig":
                      fmu=args.fmu, method=args.method, rtol=args.rtol, progress=not args.quiet)
 
 
+def check_output_folder(out: Path) -> None:
+    """Before any simulation: ``--out`` must be a folder (or not exist yet) that this user can write."""
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is an existing file, not a folder")
+    parent = next((p for p in (out, *out.parents) if p.exists()), Path("."))
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"--out {out}: cannot write into {parent}")
+
+
+#: exit status of an interrupted run (128 + SIGINT, as a shell reports Ctrl-C)
+EXIT_INTERRUPTED = 130
+
+
 def cmd_run(args) -> int:
     from dataclasses import replace
 
-    from mechanism.output.results import write_outputs
-    from mechanism.run import run
+    from mechanism.output.results import output_lock, write_outputs
+    from mechanism.run import interrupted, run, stop_on_signals
     from mechanism.ssp.config import config_from_ssp_args
+    out = Path(args.out)
+    check_output_folder(out)
     config = config_from_ssp_args(args) if args.ssp else config_from_args(args)
-    result = run(config)
-    ideal = None
-    if config.joint != "ideal" and not args.no_ideal:
-        ideal = run(replace(config, joint="ideal", mode="cosim", settings={}, balls=None))
-    figures = write_outputs(result, Path(args.out), ideal, plots=not args.no_plots)
-    print(f"wrote {args.out}/timeseries.csv, summary.json and plots")
+    with output_lock(out):
+        result = run(config)
+        stopped = interrupted()
+        ideal = None
+        if not stopped and config.joint != "ideal" and not args.no_ideal:
+            ideal = run(replace(config, joint="ideal", mode="cosim", settings={}, balls=None))
+            stopped = interrupted()
+        with stop_on_signals():   # a signal while writing waits until the files are complete
+            figures = write_outputs(result, out, ideal, plots=not args.no_plots and not stopped)
+    files = "timeseries.csv" + (", ideal_timeseries.csv" if ideal is not None else "") + ", summary.json"
+    print(f"wrote {out}/{files}" + (f" and {len(figures['plots'])} plots" if figures["plots"] else ""))
     label, part = ("second revolution", figures["rev2"]) if "rev2" in figures else ("whole run", figures.get("all"))
     if part:
         print(f"  {label}: max |e| = {part['max_eccentricity_m'] * 1e6:.3f} µm, "
               f"peak |F| = {part['peak_joint_force_N']:.2f} N, "
               + (f"max ball load = {part['max_ball_load_N']:.2f} N, " if part.get('max_ball_load_N') else "")
               + f"crank moment {part['crank_moment_min_N_m']:.3f} .. {part['crank_moment_max_N_m']:.3f} N·m")
-    if not result.ok:
-        print(f"error: {result.message} (the samples up to then are written)", file=sys.stderr)
-        return 1
+    for r in (result, ideal):
+        if r is not None and not r.ok:
+            message = " ".join(r.message.split())
+            print(f"error: {message} ({len(r.data)} samples up to then are written)", file=sys.stderr)
+            return EXIT_INTERRUPTED if r.status == "interrupted" else 1
+    if stopped or interrupted():
+        print(f"error: interrupted by {stopped or interrupted()} (the run had completed; files are written)",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
     return 0
 
 
 #: modules that add a subcommand: each defines ``register(subparsers)`` (add_parser + set_defaults(func=...))
-SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.ssp.cli")
+SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.studies.life",
+                      "mechanism.ssp.cli")
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with a one-line error (the usage is one --help away)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
 def main(argv: list[str] | None = None) -> int:
     import importlib
-    parser = argparse.ArgumentParser(prog="python -m mechanism", description=__doc__)
+    parser = Parser(prog="python -m mechanism", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="simulate the paper's slider-crank once and write CSV, JSON and PNG")
     add_run_arguments(p)
@@ -97,12 +134,36 @@ def main(argv: list[str] | None = None) -> int:
             continue
         module.register(sub)
     args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except (ValueError, FileNotFoundError, RuntimeError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    return call(args.func, args)
 
+
+def _terminate(signum, frame):
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def call(func, args) -> int:
+    """``func(args)`` with every failure as one line naming the cause and a non-zero exit status: 2 for bad
+    input, 1 for a failed run or an I/O problem (a full disk), 130 for an interrupt (SIGINT, or SIGTERM
+    outside a run: within a run both end it with its samples written). ``MECHANISM_TRACEBACK=1`` re-raises."""
+    from fmpy.fmi1 import FMICallException
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _terminate)
+    try:
+        return func(args)
+    except KeyboardInterrupt as err:
+        print(f"error: interrupted by {err.args[0] if err.args else 'SIGINT'}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception as err:
+        if os.environ.get("MECHANISM_TRACEBACK"):
+            raise
+        if isinstance(err, OSError) and err.strerror:
+            cause = f"{err.strerror}" + (f": {err.filename}" if err.filename else "")
+        elif isinstance(err, (ValueError, RuntimeError, FMICallException)):
+            cause = str(err)
+        else:
+            cause = f"{type(err).__name__}: {err}"
+        print(f"error: {cause}".splitlines()[0], file=sys.stderr)
+        return 2 if isinstance(err, (ValueError, FileNotFoundError)) else 1
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -9,19 +9,24 @@ reference. Writing files is ``mechanism.output``'s job.
 from __future__ import annotations
 
 import argparse
+import numbers
+import signal
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from fmu_bearing.ball_bearing import BallBearing
 from fmu_bearing.parameters import from_values as bearing_parameters
+from fmu_bearing.parameters import validate as validate_bearing
 from mechanism.cosim.adaptive import AdaptiveSettings
 from mechanism.cosim.adaptive import run_adaptive as run_adaptive_master
 from mechanism.cosim.coupling import DEFAULT_SCHEME
 from mechanism.cosim.energy import EnergyAccount
-from mechanism.cosim.endpoints import FmuEndpoint, InProcessEndpoint
+from mechanism.cosim.endpoints import InProcessEndpoint, fmu_endpoint
 from mechanism.cosim.joint import BearingLink
-from mechanism.cosim.master import MasterSettings, run_master
+from mechanism.cosim.master import MasterSettings, RunFailure, run_master
 from mechanism.cosim.monolithic import run_monolithic
 from mechanism.cosim.record import RunResult
 from mechanism.multibody.solver import System
@@ -33,9 +38,24 @@ MODES = ("cosim", "inprocess", "monolithic")
 FMU_NAMES = {"bearing": "BallBearing", "clearance": "JournalClearance"}
 
 
+#: documented ranges of RunConfig's numbers (docs/robustness.md): name -> (min, max, unit).
+#: Beyond them a run is meaningless (a step of 1e300 s) or numerically absurd, so they are errors.
+RANGES = {
+    "rpm": (1e-3, 1e5, "rpm"),
+    "revs": (1e-4, 1e3, "revolutions"),
+    "step": (1e-9, 1e-2, "s"),
+    "output_interval": (1e-9, 1.0, "s"),
+    "rtol": (1e-14, 1e-2, ""),
+}
+
+
 @dataclass
 class RunConfig:
-    """Everything that defines a run (SI, except rpm). ``settings`` are start values for the bearing component."""
+    """Everything that defines a run (SI, except rpm). ``settings`` are start values for the bearing component.
+
+    Numbers outside ``RANGES``, and a step or output interval longer than the run, are ``ValueError``s
+    naming the range (a run with no step would otherwise "complete" with one sample).
+    """
 
     rpm: float = 1200.0
     revs: float = 2.0
@@ -58,8 +78,19 @@ class RunConfig:
             raise ValueError(f"joint must be one of {JOINTS}, not {self.joint!r}")
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, not {self.mode!r}")
-        if not (self.step > 0 and self.output_interval > 0 and self.revs > 0 and self.rpm > 0):
-            raise ValueError("rpm, revs, step and output_interval must be positive")
+        for name, (lo, hi, unit) in RANGES.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) or not lo <= value <= hi:
+                raise ValueError(f"{name} = {value!r} is outside its range [{lo:g}, {hi:g}] {unit}".rstrip())
+        if self.balls is not None and (isinstance(self.balls, bool) or not isinstance(self.balls, numbers.Integral)):
+            raise ValueError(f"balls = {self.balls!r} must be an integer")
+        if self.joint == "bearing":   # the bearing's parameters before any run (BearingParameterError)
+            validate_bearing(bearing_parameters(self.component_settings))
+        t_end = self.revs * self.crank_period
+        for name in ("step", "output_interval"):
+            if getattr(self, name) > t_end:
+                raise ValueError(f"{name} = {getattr(self, name)!r} s is longer than the run "
+                                 f"({self.revs:g} revolutions at {self.rpm:g} rpm = {t_end:.6g} s)")
 
     @property
     def crank_period(self) -> float:
@@ -123,13 +154,79 @@ def energy_account(config: RunConfig, system: System, link: BearingLink) -> Ener
     return EnergyAccount(system, link, BallBearing(bearing_parameters(config.component_settings)))
 
 
+class Interrupted(RunFailure):
+    """Raised inside the master (at a sample) after SIGINT/SIGTERM: the run stops with the samples so far."""
+
+
+class _Stop:
+    """The signal received while ``stop_on_signals`` is active (None: none)."""
+
+    signal: str | None = None
+
+
+@contextmanager
+def stop_on_signals():
+    """While active (main thread only), SIGINT and SIGTERM only note the signal; the master stops at its next
+    sample (``_interruptible``) and the run ends with status "interrupted" and the samples so far.
+
+    Nothing is raised from the handler itself: it may run while the FMU's Python code executes on this
+    thread, where an exception would escape into pythonfmu (see fmu_bearing/slaves/__init__.py).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def note(signum, frame):
+        _Stop.signal = signal.Signals(signum).name
+
+    _Stop.signal = None
+    previous = {s: signal.signal(s, note) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def _interruptible(observe):
+    """``observe`` that raises ``Interrupted`` (caught by the master, samples kept) once a signal was noted."""
+    def wrapped(q, qd, qdd, lam, t):
+        if _Stop.signal is not None:
+            raise Interrupted(-1, t, f"interrupted by {_Stop.signal}")
+        return observe(q, qd, qdd, lam, t)
+    return wrapped
+
+
+def _mark_interrupted(result: RunResult) -> RunResult:
+    """A run stopped by ``Interrupted`` is "interrupted", not "failed"."""
+    if _Stop.signal is not None and result.status == "failed":
+        t = result.meta.pop("failure", {}).get("time_s")
+        result.status = "interrupted"
+        result.meta["interrupted"] = {"signal": _Stop.signal, "time_s": t}
+        result.message = f"interrupted by {_Stop.signal}" + (f" at t = {t:.9g} s" if t is not None else "")
+    return result
+
+
+def interrupted() -> str | None:
+    """The signal (SIGINT, SIGTERM) that stopped the last ``run``, or None."""
+    return _Stop.signal
+
+
 def run(config: RunConfig) -> RunResult:
-    """Run the slider-crank as configured and return the recorded samples (not yet written)."""
+    """Run the slider-crank as configured and return the recorded samples (not yet written).
+
+    SIGINT/SIGTERM during the run (main thread) end it with status "interrupted" and the samples so far.
+    """
+    with stop_on_signals():
+        return _mark_interrupted(_run(config))
+
+
+def _run(config: RunConfig) -> RunResult:
     params = SliderCrankParameters(rpm=config.rpm, gravity=config.gravity)
     model = build(params, "ideal" if config.joint == "ideal" else "bearing")
     system = System(model)
     q0, qd0 = initial_state(system, params)
-    observe = slider_crank_observer(system)
+    observe = _interruptible(slider_crank_observer(system))
     t_end = config.revs * config.crank_period
     meta = {"config": asdict(config), "crank_period_s": config.crank_period,
             "clearance_per_side_m": clearance_per_side(config)}
@@ -153,7 +250,7 @@ def run(config: RunConfig) -> RunResult:
         meta["contact_stiffness_N_m1.5"] = endpoint.bearing.stiffness
     else:
         path = fmu_path(config)
-        endpoint = FmuEndpoint(path, config.component_settings, instance_name=config.joint)
+        endpoint = fmu_endpoint(path, config.component_settings, instance_name=config.joint)  # FMI 2 or 3
         meta["fmu"] = str(path)
     try:
         return run_master(system, q0, qd0, settings, observe, link=link, endpoint=endpoint, meta=meta,
@@ -184,7 +281,7 @@ def run_adaptive(config, tol: float, initial_step: float | None = None, **settin
         endpoint = InProcessEndpoint(bearing_parameters(config.component_settings))
     else:
         path = fmu_path(config)
-        endpoint = FmuEndpoint(path, config.component_settings, instance_name=config.joint)
+        endpoint = fmu_endpoint(path, config.component_settings, instance_name=config.joint)  # FMI 2 or 3
         meta["fmu"] = str(path)
     start = time.perf_counter()
     try:

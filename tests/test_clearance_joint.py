@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 import shutil
-from ctypes import byref
 from pathlib import Path
 
 import numpy as np
@@ -303,10 +302,9 @@ class Instance:
 
     def __init__(self, path: Path, parameters: dict | None = None, initialize: bool = True):
         from fmpy import extract, read_model_description
-        from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
-        from fmpy import calloc, free
-        from fmpy.logging import addLoggerProxy
+        from fmpy.fmi2 import FMU2Slave
+
+        from mechanism.cosim.fmpy_logging import fmpy_callbacks
         self.md = read_model_description(str(path))
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.messages: list[tuple[int, str, str]] = []
@@ -314,11 +312,7 @@ class Instance:
         def logger(component, instance, status, category, message):
             self.messages.append((status, (category or b"").decode(), (message or b"").decode()))
 
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        addLoggerProxy(byref(self.callbacks))
+        self.callbacks = fmpy_callbacks(logger)   # fmpy's proxy formats the message; never dangles
         self.unzipdir = extract(str(path))
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
                              modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="jc")

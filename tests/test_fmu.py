@@ -2,7 +2,6 @@
 force law, FMU state, several instances, capacities, and the error paths (status and logger message)."""
 from __future__ import annotations
 
-import ctypes
 import json
 import math
 import os
@@ -17,9 +16,8 @@ import numpy as np
 import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, free)
-from fmpy.logging import addLoggerProxy
+from fmpy.fmi2 import (FMU2Slave)
+from mechanism.cosim.fmpy_logging import fmpy_callbacks
 from fmpy.validation import validate_fmu
 
 from fmu_bearing.ball_bearing import BallBearing
@@ -58,11 +56,7 @@ class Instance:
     def __init__(self, fmu: FMU, name="bearing", params=None, inputs=None, logging_on=True, initialise=True):
         self.fmu, self.messages = fmu, []
         self.params = dict(params or {})
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        addLoggerProxy(ctypes.byref(self.callbacks))  # formats the variadic message
+        self.callbacks = fmpy_callbacks(self._log)  # fmpy's proxy formats the message; never dangles
         self.s = FMU2Slave(guid=fmu.md.guid, unzipDirectory=fmu.dir,
                            modelIdentifier=fmu.md.coSimulation.modelIdentifier, instanceName=name)
         self.s.instantiate(callbacks=self.callbacks, loggingOn=logging_on)
@@ -386,7 +380,7 @@ def test_eccentricity_beyond_the_limit_is_an_error(fmu, params, e_x):
 
 
 INVALID = [("n_balls", 2), ("n_balls", 21), ("poisson_ratio", 0.7), ("youngs_modulus", -1e9),
-           ("radial_clearance", -1e-6), ("inner_groove_conformity", 0.5), ("damping_coefficient", -5.0),
+           ("radial_clearance", -1e-4), ("reliability_factor", 2.0), ("inner_groove_conformity", 0.5), ("damping_coefficient", -5.0),
            ("inner_race_diameter", 0.03), ("n_balls", 14)]
 
 
@@ -522,15 +516,18 @@ def test_fmu_packs_the_package_and_build_options(fmu):
 
 def test_many_failed_initialisations_leave_the_host_process_intact(fmu, tmp_path):
     """pythonfmu 0.7 over-releases Python objects when an exception fails a call; repeated failed
-    initialisations used to crash the host a few failures later (see fmu_bearing.slaves.hold_before_raise)."""
+    initialisations used to crash the host a few failures later (see fmu_bearing.slaves.hold_before_raise).
+    The failed slaves are kept alive, but their imports are undone: after the last free, sys.path and the
+    FMU's modules in sys.modules are as before the first instance (issue 13)."""
     script = textwrap.dedent(f"""
-        import gc
+        import gc, sys
         from fmpy import extract, read_model_description
         from fmpy.fmi1 import FMICallException
         from fmpy.fmi2 import FMU2Slave
-        d = extract({str(fmu.path)!r}, unzipdir={str(tmp_path / "x")!r})
+        d = str(extract({str(fmu.path)!r}, unzipdir={str(tmp_path / "x")!r}))
         md = read_model_description(d)
         vr = {{v.name: v.valueReference for v in md.modelVariables}}
+        path, modules = list(sys.path), set(sys.modules)
         def instance(name):
             s = FMU2Slave(guid=md.guid, unzipDirectory=d, modelIdentifier="BallBearing", instanceName=name)
             s.instantiate(); s.setupExperiment(startTime=0.0); s.enterInitializationMode()
@@ -543,16 +540,24 @@ def test_many_failed_initialisations_leave_the_host_process_intact(fmu, tmp_path
                 raise SystemExit("initialisation did not fail")
             except FMICallException:
                 pass
-            s.freeInstance()
+            try:
+                s.doStep(0.0, 1e-4)
+                raise SystemExit("a failed instance stepped")
+            except FMICallException:
+                pass
+            s.terminate(); s.freeInstance()
             gc.collect()
         s = instance("good")
         s.setReal([vr["e_x"]], [2e-5]); s.exitInitializationMode()
         for k in range(200):
             s.doStep(k * 1e-4, 1e-4)
         x = [dict(a=i) for i in range(100000)]; gc.collect()
-        print(s.getReal([vr["F_x"]])[0])
+        F = s.getReal([vr["F_x"]])[0]
         s.terminate(); s.freeInstance()
+        left = [m for m in set(sys.modules) - modules if str(getattr(sys.modules[m], "__file__", "")).startswith(d)]
+        print(F, sys.path == path, left)
     """)
     proc = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert float(proc.stdout.strip().splitlines()[-1]) > 0
+    F, restored, left = proc.stdout.strip().splitlines()[-1].split(" ", 2)
+    assert float(F) > 0 and restored == "True" and left == "[]"

@@ -63,6 +63,15 @@ HOST = textwrap.dedent("""
         during = [m for m in set(sys.modules) - modules_before]
         for s in instances:
             s.terminate(); s.freeInstance()
+        # one instance alone, reset: its old slave object is the last one when pythonfmu frees it
+        s = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName="alone")
+        s.instantiate(loggingOn=False); s.setupExperiment(startTime=0.0); s.enterInitializationMode()
+        s.exitInitializationMode(); s.reset()
+        s.setupExperiment(startTime=0.0); s.enterInitializationMode()
+        s.setReal([vr["e_x"]], [E_X]); s.exitInitializationMode(); s.doStep(0.0, 1e-4)
+        forces.append(s.getReal([vr["F_x"], vr["F_y"]]))
+        s.terminate(); s.freeInstance()
         left = {name: str(getattr(m, "__file__", None)) for name, m in sys.modules.items()
                 if name not in modules_before and str(getattr(m, "__file__", None)).startswith(unzip)}
         report["fmus"][md.modelName] = {
@@ -92,9 +101,10 @@ def check_report(report: dict, names) -> None:
     expected = expected_forces()
     for name in names:
         r = report["fmus"][name]
-        assert r["forces"] == [expected[name]] * 2, name           # bit for bit, both instances (one reset)
+        assert r["forces"] == [expected[name]] * 3, name           # bit for bit, all instances (two reset)
         assert r["path_restored"], name
-        assert r["private_during"], name                            # the FMU did import its private modules ...
+        private = {m.split(".")[0].rsplit("_", 1)[0] for m in r["private_during"]}
+        assert {"_fmu_bearing", "_pythonfmu"} <= private, name      # the FMU did import its private modules ...
         assert r["fmu_modules_left"] == {}, name                    # ... and none is left after the last free
 
 
@@ -193,6 +203,25 @@ def test_failed_initialisation_names_its_cause_with_a_category(ball_bearing_fmu,
     assert not any("unknown error" in m for _, m in errors)
     if not logging_on:                          # nothing but the error reaches a host that switched logging off
         assert len(host.messages) == 1
+
+
+@pytest.mark.parametrize("name", ["BallBearing", "JournalClearance"])
+def test_failed_instantiation_names_its_cause_with_logging_off(fmus, tmp_path, name):
+    unzip = tmp_path / "x"
+    extract(str(fmus[name]), unzipdir=str(unzip))
+    (unzip / "resources" / "build_options.json").write_text("{not json")   # a damaged FMU
+    messages = []
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = fmi2CallbackLoggerTYPE(lambda env, inst, status, cat, msg: messages.append(
+        (status, cat.decode(), msg.decode())))
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    md = read_model_description(str(unzip))
+    s = FMU2Slave(guid=md.guid, unzipDirectory=str(unzip), modelIdentifier=name, instanceName="damaged")
+    with pytest.raises(Exception, match="Failed to instantiate"):
+        s.instantiate(callbacks=callbacks, loggingOn=False)
+    assert len(messages) == 1 and messages[0][:2] == (3, "logStatusError"), messages
+    assert messages[0][2].startswith("instantiation failed: JSONDecodeError(")
 
 
 @pytest.mark.parametrize("name", ["BallBearing", "JournalClearance"])

@@ -250,7 +250,9 @@ INVALID = [
     ({"n_balls": 14}, None, "n_balls"),                 # 37.9 mm sin(pi/14) = 8.4 mm < D = 8.7 mm
     ({"inner_race_diameter": 30.0e-3}, None, "inner_race_diameter"),
     ({"outer_race_diameter": 45.5e-3}, None, "outer_race_diameter"),
-    ({"radial_clearance": -1e-6}, None, "radial_clearance"),
+    ({"radial_clearance": -0.1e-3}, None, "radial_clearance"),   # preload beyond -1 % D = -87 um
+    ({"reliability_factor": 0.0}, None, "reliability_factor"),
+    ({"reliability_factor": 1.5}, None, "reliability_factor"),
     ({"youngs_modulus": 0.0}, None, "youngs_modulus"),
     ({"youngs_modulus": -2e11}, None, "youngs_modulus"),
     ({"poisson_ratio": 0.0}, None, "poisson_ratio"),

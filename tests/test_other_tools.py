@@ -135,7 +135,8 @@ def test_tools_agree_with_our_master_on_the_same_ssp(results, tool):
 
 
 def test_named_parameter_set_reaches_the_fmus_in_ecos_and_libcosim(ssp_archive):
-    """ecos applies the SSP's named set; libcosim gets the same values as initial values: same run."""
+    """A named set is a variant SSD: libcosim reads the variant .ssd, ecos the unpacked archive with the
+    variant as its SystemStructure.ssd (and the set named): same run, not the default 8 balls."""
     _need("libcosim")
     _need("ecos")
     name = "BB1B420205-15balls-1200rpm"
@@ -170,7 +171,9 @@ def test_ecos_command_line_runs_the_ssp_with_libpython_preloaded(ssp_archive, tm
     shutil.copy(exe, local)
     local.chmod(0o755)          # the wheel installs it without the executable bit
     env = dict(os.environ, LD_PRELOAD=str(lib), PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-    proc = subprocess.run([str(local), "simulate", "--path", str(ssp_archive), "--stepSize", "1e-5",
+    # ecos reads only a SystemStructure.ssd: the 600 rpm set is the unpacked archive with its variant SSD there
+    variant = ssp_tools._unpacked(str(ssp_archive), "BB1B420205-600rpm.ssd")
+    proc = subprocess.run([str(local), "simulate", "--path", str(variant), "--stepSize", "1e-5",
                            "--stopTime", "0.0005", "--parameterSet", "BB1B420205-600rpm", "--noParallel", "-l", "info"],
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     log = proc.stdout + proc.stderr
@@ -179,7 +182,7 @@ def test_ecos_command_line_runs_the_ssp_with_libpython_preloaded(ssp_archive, tm
     # after the CSV was written.
     assert "Wrote CSV data" in log, log
     assert proc.returncode == 0 or proc.returncode < 0, log
-    with open(tmp_path / "SliderCrankBearing.csv", newline="") as fh:
+    with open(tmp_path / f"{variant.name}.csv", newline="") as fh:   # ecos names the CSV after --path
         rows = list(csv.reader(fh, skipinitialspace=True))
     header = [h.split("[")[0].strip() for h in rows[0]]
     last = dict(zip(header, rows[-1]))

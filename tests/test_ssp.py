@@ -19,6 +19,7 @@ from fmu_bearing.parameters import BearingParameters
 from mechanism import ssp as sm
 from mechanism.ssp import config as ssp_config
 from mechanism.ssp import tools as ssp_tools
+from mechanism.ssp.system import NS, SSV_TYPE
 from mechanism.systems.slider_crank import SliderCrankParameters
 
 H = 1e-5
@@ -55,14 +56,66 @@ def test_parameter_sets_hold_the_dataclass_defaults(ssp_archive):
     with sm.load_ssp(ssp_archive) as system:
         default = system.parameters()
         assert system.parameter_set_names[0] == sm.DEFAULT_PARAMETER_SET
+        assert sorted(system.parameter_set_names) == sorted(s.name for s in sm.PARAMETER_SETS)
+        assert system.ssd == sm.SSD_IN_ARCHIVE
         assert default["bearing"] == BearingParameters().as_dict()
         assert default["mechanism"] == {k: getattr(SliderCrankParameters(), k) for k in default["mechanism"]}
-        for rpm in (300, 600, 900, 1200):
+    for rpm in (300, 600, 900, 1200):
+        with sm.load_ssp(ssp_archive, f"BB1B420205-{rpm}rpm") as system:
             values = system.parameters(f"BB1B420205-{rpm}rpm")
             assert values["mechanism"]["rpm"] == rpm and values["bearing"] == BearingParameters().as_dict()
-        for n in (15, 20):
-            bearing = system.parameters(f"BB1B420205-{n}balls-1200rpm")["bearing"]
+            assert system.ssd == (sm.SSD_IN_ARCHIVE if rpm == 1200 else f"BB1B420205-{rpm}rpm.ssd")
+    for n in (15, 20):
+        with sm.load_ssp(ssp_archive, f"BB1B420205-{n}balls-1200rpm") as system:
+            bearing = system.parameters()["bearing"]
             assert bearing == BearingParameters(n_balls=n, allow_ball_overlap=True).as_dict()
+            with pytest.raises(sm.SspError, match="read the variant with load_ssp"):
+                system.parameters(sm.DEFAULT_PARAMETER_SET)
+
+
+def _bindings(ssd_text: str) -> dict[str, list[str]]:
+    """component -> the .ssv sources of its ParameterBindings, in order."""
+    import xml.etree.ElementTree as ET
+    root = ET.fromstring(ssd_text.encode())
+    return {c.get("name"): [b.get("source") for b in c.findall("ssd:ParameterBindings/ssd:ParameterBinding", NS)]
+            for c in root.findall("ssd:System/ssd:Elements/ssd:Component", NS)}
+
+
+def test_default_ssd_binds_one_set_per_component_and_variant_ssds_the_others(ssp_archive):
+    """SSP 1.0 applies every binding of a component in order: with one binding per component in every SSD,
+    each conforming tool ends with the same set. The variants differ from the default SSD only there."""
+    with zipfile.ZipFile(ssp_archive) as z:
+        ssds = {n: z.read(n).decode() for n in z.namelist() if n.endswith(".ssd")}
+        assert "/" not in "".join(ssds)                      # all at the root of the archive
+        expected = {sm.SSD_IN_ARCHIVE: sm.DEFAULT_PARAMETER_SET}
+        expected.update({sm.variant_ssd_name(s.name): s.name for s in sm.PARAMETER_SETS[1:]})
+        assert set(ssds) == set(expected)
+        strip = lambda t: re.sub(r'(<ssd:ParameterBindings>.*?</ssd:ParameterBindings>|description="[^"]*")', "",  # noqa: E731
+                                 t, flags=re.S)
+        for member, set_name in expected.items():
+            bindings = _bindings(ssds[member])
+            assert bindings == {c: [sm.ssv_path(set_name, c)] for c in sm.COMPONENTS}, member
+            for c, (source,) in bindings.items():
+                assert f'name="{set_name}"' in z.read(source).decode()
+            assert strip(ssds[member]) == strip(ssds[sm.SSD_IN_ARCHIVE]), member
+    for spec in sm.PARAMETER_SETS[1:]:
+        sm.validate_schema(sm.SOURCE_DIR / sm.variant_ssd_name(spec.name), "SystemStructureDescription.xsd")
+
+
+def test_several_bindings_are_applied_in_order_the_last_set_wins(ssp_archive, tmp_path):
+    """The SSP 1.0 reading of an SSD with every set bound to each component (this project's SSD until
+    issue 13): all bindings applied in order, so the last set's values."""
+    def all_bindings(text):
+        sources = "".join(f'<ssd:ParameterBinding type="{SSV_TYPE}" source="{sm.ssv_path(s.name, "{c}")}" />'
+                          for s in sm.PARAMETER_SETS)
+        return re.sub(r'(<ssd:Component name="(\w+)".*?<ssd:ParameterBindings>).*?(</ssd:ParameterBindings>)',
+                      lambda m: m.group(1) + sources.replace("{c}", m.group(2)) + m.group(3), text, flags=re.S)
+
+    six = _edit(ssp_archive, tmp_path, SSD, edit=all_bindings)
+    with sm.load_ssp(six) as system:
+        assert all(len(c.parameter_sets) == len(sm.PARAMETER_SETS) for c in system.components.values())
+        assert system.parameter_set_names[0] == sm.PARAMETER_SETS[-1].name
+        assert system.parameters()["bearing"] == sm.PARAMETER_SETS[-1].values("bearing")
 
 
 def test_ssd_and_ssv_validate_against_the_ssp_1_0_schema(ssp_archive):
@@ -187,8 +240,10 @@ BAD = {
 def test_bad_ssp_is_rejected_naming_file_element_and_problem(ssp_archive, tmp_path, case):
     edit, member, element, problem = BAD[case]
     bad = _edit(ssp_archive, tmp_path, **edit)
+    parts = member.split("/")   # an .ssv of a variant set is read with the variant SSD
+    parameter_set = parts[1] if member.endswith(".ssv") and parts[1] != sm.DEFAULT_PARAMETER_SET else None
     with pytest.raises(sm.SspError) as info:
-        sm.load_ssp(bad)
+        sm.load_ssp(bad, parameter_set)
     err = info.value
     assert err.file == f"{bad}!/{member}", str(err)
     assert err.element == element, str(err)
@@ -409,3 +464,65 @@ def test_ssp_cli_generate_check_and_pack(ssp_archive, tmp_path, capsys):
     assert main(["ssp-pack", "--no-build", "--fmu-dir", str(fmu_dir), "--out", str(out)]) == 2
     assert "not built" in capsys.readouterr().err
     assert math.isfinite(out.stat().st_size)
+
+
+# ----------------------------------------------------------------------------------------------
+# every tool applies the same parameter set: fmpy.ssp, libcosim, ecos (issue 13, item 7)
+# ----------------------------------------------------------------------------------------------
+def _tool_missing(tool: str) -> str | None:
+    try:
+        if tool == "libcosim":
+            import libcosimpy.CosimExecution  # noqa: F401
+        elif tool == "ecos":
+            import ecospy  # noqa: F401
+    except (ImportError, OSError) as err:   # ecospy: libtbb.so.12 missing (apt-get install libtbb12)
+        return f"{tool} does not load here ({err}); pip install '.[tools]'"
+    return None
+
+
+def test_fmpy_libcosim_and_ecos_apply_the_same_parameter_set(ssp_archive, monkeypatch):
+    """Each tool reads the set from the SSD itself (default: SystemStructure.ssd; a named set: its variant
+    SSD): n_balls read back from the bearing instance, and the force after 30 steps at 1e-5 s, agree."""
+    import fmpy.ssp.simulation as fmpy_sim
+    missing = {tool: _tool_missing(tool) for tool in ssp_tools.TOOLS}
+    if any(missing.values()):
+        pytest.skip("; ".join(r for r in missing.values() if r))
+    read_back = {}
+    free = fmpy_sim.free_fmu
+
+    def free_after_reading_n_balls(component):   # fmpy.ssp records connectors only: read the parameter back
+        if component.name == "bearing":
+            read_back["n_balls"] = fmpy_sim.get_value(component, "n_balls")
+        free(component)
+
+    monkeypatch.setattr(fmpy_sim, "free_fmu", free_after_reading_n_balls)
+    record = ("bearing.F_x", "bearing.F_y", "bearing.loaded_balls", "bearing.max_ball_load")
+    peak = {}
+    for set_name, n_balls in ((None, 8), ("BB1B420205-15balls-1200rpm", 15)):
+        runs = {}
+        for tool in ssp_tools.TOOLS:
+            extra = () if tool == "fmpy" else ("bearing.n_balls",)
+            runs[tool] = ssp_tools.simulate_with(tool, ssp_archive, set_name, step=H, t_end=30 * H,
+                                               record=record + extra)
+        assert read_back["n_balls"] == n_balls
+        assert np.all(runs["libcosim"]["bearing.n_balls"] == n_balls)
+        assert np.all(runs["ecos"]["bearing.n_balls"] == n_balls)
+        peak[n_balls] = np.max(np.hypot(runs["libcosim"]["bearing.F_x"], runs["libcosim"]["bearing.F_y"]))
+        for key in record:
+            ref = runs["libcosim"][key]
+            scale = np.max(np.abs(ref)) if key.endswith(("loaded_balls", "max_ball_load")) else peak[n_balls]
+            assert np.max(np.abs(runs["ecos"][key] - ref)) <= 1e-10 * scale, key
+            if key != "bearing.loaded_balls":
+                # fmpy.ssp starts its connectors at 0, not at the start outputs (test_other_tools.py): ~1e-4
+                assert np.max(np.abs(runs["fmpy"][key] - ref)) <= 1e-3 * scale, key
+    assert abs(peak[15] - peak[8]) > 0.05 * peak[8]   # the 15-ball set is a different bearing
+
+
+def test_run_parameter_set_picks_the_variant_ssd(ssp_archive):
+    """`run --ssp FILE --parameter-set NAME`: our master reads the variant SSD of NAME."""
+    config, system = ssp_config.config_from_ssp(ssp_archive, "BB1B420205-15balls-1200rpm")
+    try:
+        assert system.ssd == "BB1B420205-15balls-1200rpm.ssd"
+        assert config.settings["n_balls"] == 15 and config.settings["allow_ball_overlap"] is True
+    finally:
+        system.close()

@@ -13,15 +13,16 @@ standard library is imported here):
   ``exit_initialization_mode``). When an exception reaches pythonfmu's C++ side, it releases its references
   to the slave class, the slave instance and its log queue once in its error handler and once more in the
   instance's destructor; after a few such exceptions in one process those objects are freed while still in
-  use and the host crashes. Parking one extra reference to each balances that (at worst, if pythonfmu is
-  fixed, a small leak per failure). Better still, never let an exception escape where a status can be
+  use and the host crashes. Parking extra references balances that (a small leak per failure). Better still, never let an exception escape where a status can be
   returned instead (``do_step`` returning False gives fmi2Discard).
 * ``guard_pythonfmu_exit(resources)``: call it from the slave's ``__init__``. At process exit the binary's
   C++ static destructors delete its Python-state object and then the library destructor,
   ``finalizePythonInterpreter``, deletes it again: a double free that corrupts the heap after the host has
   finished ("corrupted double-linked list", SIGABRT, at random; Linux). Calling the exported
-  ``finalizePythonInterpreter`` once from a Python ``atexit`` hook releases the object early and turns both
-  later calls into no-ops.
+  ``finalizePythonInterpreter`` once, early, releases the object and turns both later calls into no-ops.
+  The FMUs' loader library (``fmu_bearing/native/loader.c``, the FMU's binary since issue 13) does this
+  in every host from a C exit handler; this function only covers an FMU without the loader (pythonfmu's
+  binary alone), from a Python ``atexit`` hook.
 
 and what makes a built FMU a good guest in its host process (issue 13):
 
@@ -66,6 +67,8 @@ UNIT_DEFINITIONS = {
     "Pa": {"kg": 1, "m": -1, "s": -2},
     "Pa.s": {"kg": 1, "m": -1, "s": -1},
     "1/Pa": {"kg": -1, "m": 1, "s": 2},
+    "h": {"s": 1, "factor": 3600.0},
+    "Mrev": {"rad": 1, "factor": 2.0e6 * math.pi},   # millions of revolutions (bearing life)
     "N/m1.5": None,                      # FMI exponents are integers: declared by name only
 }
 
@@ -138,7 +141,7 @@ class HostLogger:
     the slave logs through pythonfmu's queue as before.
     """
 
-    def __init__(self, address, instance_name):
+    def __init__(self, address, instance_name, resources=None):
         self._call = None
         if not address or not sys.platform.startswith("linux") or platform.machine() not in ("x86_64", "AMD64"):
             return
@@ -152,13 +155,18 @@ class HostLogger:
                 return
             if ctypes.string_at(data, length) != name or not words[9]:
                 return
-            callbacks = (ctypes.c_void_p * 5).from_address(words[9])   # fmi2CallbackFunctions
+            functions = words[9]                                         # fmi2CallbackFunctions*
+            callbacks = (ctypes.c_void_p * 5).from_address(functions)
+            host = _loader_host_callbacks(resources, callbacks[4])
+            if host:   # pythonfmu was given the loader's callbacks (fmu_bearing/native): look behind them
+                functions = host
+                callbacks = (ctypes.c_void_p * 5).from_address(functions)
             if not callbacks[0]:
                 return
             self._environment, self._name = callbacks[4], name
             fmpy = sys.modules.get("fmpy.fmi2")
             if fmpy is not None and hasattr(fmpy, "defaultCallbacks"):
-                if words[9] == ctypes.addressof(fmpy.defaultCallbacks):   # fmpy's defaults: its printer
+                if functions == ctypes.addressof(fmpy.defaultCallbacks):   # fmpy's defaults: its printer
                     printer = getattr(sys.modules.get("fmpy.fmi1"), "printLogMessage", None)
                     self._call = partial(_call_python, printer) if callable(printer) else None
                     return
@@ -182,6 +190,27 @@ class HostLogger:
         except Exception:   # never let a logging problem fail the FMU
             return False
         return True
+
+
+def _loader_host_callbacks(resources, environment) -> int:
+    """The host's fmi2CallbackFunctions* behind ``environment`` when it is one of the FMU loader's instances
+    (``bearingLoaderHostCallbacks`` of fmu_bearing/native/loader.c, the FMU's binary), else 0."""
+    if not resources or not environment:
+        return 0
+    binaries = os.path.join(os.path.dirname(os.path.abspath(resources)), "binaries")
+    for path in sorted(glob.glob(os.path.join(binaries, "*", "*"))):
+        stem, ext = os.path.splitext(os.path.basename(path))
+        if ext not in (".so", ".dll", ".dylib") or stem.endswith("_pythonfmu"):
+            continue
+        try:
+            function = ctypes.CDLL(path).bearingLoaderHostCallbacks
+        except (OSError, AttributeError):
+            continue
+        function.restype, function.argtypes = ctypes.c_void_p, [ctypes.c_void_p]
+        found = function(ctypes.c_void_p(environment))
+        if found:
+            return int(found)
+    return 0
 
 
 def _call_native(function, environment, name, status, category, message):
@@ -235,7 +264,9 @@ def release_on_free(slave) -> None:
             sys.modules.setdefault(name, module)
         sys.path.insert(0, entry)
     _LIVE[names] = _LIVE.get(names, 0) + 1
-    weakref.finalize(slave, _release, names, resources).atexit = False
+    release = weakref.finalize(slave, _release, names, resources)
+    release.atexit = False
+    slave.__dict__["_release_imports"] = release   # hold_before_raise runs it early (the slave stays alive)
 
 
 def _release(names, resources) -> None:
@@ -267,9 +298,14 @@ def hold_before_raise(slave) -> None:
     pythonfmu releases each of the three once in its error handler and once more in fmi2FreeInstance, one
     release too many. The slave is parked twice: it holds no reference cycle (``weak_accessors``), so one
     parked reference would let the second release free it while this list still points to it. A failed
-    instance thus stays alive (and ``release_on_free`` does not run for it): a small leak per failure.
+    instance thus stays alive (a small leak per failure); what ``release_on_free`` would undo at its free is
+    undone now (its ``sys.path`` entry; the FMU's modules if no other instance lives): the failed instance
+    can still refuse steps, be terminated, freed or reset, none of which imports anything.
     """
     PYTHONFMU_EXCEPTION_REFS.append((type(slave), slave, slave, getattr(slave, "log_queue", None)))
+    release = slave.__dict__.get("_release_imports")
+    if release is not None:
+        release()
 
 
 def guard_pythonfmu_exit(resources) -> None:
@@ -284,6 +320,8 @@ def guard_pythonfmu_exit(resources) -> None:
     if threading.current_thread() is not threading.main_thread():
         return
     binaries = os.path.join(os.path.dirname(os.path.normpath(str(resources))), "binaries", "linux64")
+    if glob.glob(os.path.join(binaries, "*_pythonfmu.so")):
+        return  # the FMU's binary is the loader (fmu_bearing/native): it finalises at exit itself
     for path in glob.glob(os.path.join(binaries, "*.so")):
         if path in _EXIT_GUARDED:
             continue

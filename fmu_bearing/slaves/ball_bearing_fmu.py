@@ -19,7 +19,6 @@ This file is the FMU's slave module: pythonfmu's binary imports it as a top-leve
 the slave class by matching its source lines against a class statement deriving from Fmi2Slave, so
 it uses absolute imports only and no ``from __future__`` import.
 """
-import math
 from dataclasses import fields
 from functools import partial
 
@@ -28,10 +27,13 @@ from pythonfmu import (Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, F
 from pythonfmu.enums import Fmi2Status
 
 from fmu_bearing import ball_bearing as physics
-from fmu_bearing.parameters import BearingParameters
+from fmu_bearing import life
+from fmu_bearing.parameters import BearingParameters, validate
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
 from fmu_bearing.slaves import (HostLogger, add_initial_unknowns, add_unit_definitions, guard_pythonfmu_exit,
                                 hold_before_raise, read_build_options, release_on_free, weak_accessors)
+from fmu_bearing.slaves.state import check_state, variable_kinds
+from fmu_bearing.slaves.stepping import LIFE_STATE, BearingStepping, ignore_value, life_output
 
 #: per-ball outputs when the FMU was built without an explicit --max-balls
 DEFAULT_CAPACITY = 20
@@ -51,6 +53,9 @@ _INPUT_VRS = list(range(len(INPUTS)))
 
 CAGE_ANGLE = ("cage_angle", "rad",
               "angle of ball 1 (ball r at cage_angle + 2 pi (r-1)/n_balls), time integral of the cage speed (eq. 16)")
+
+#: load ratings and life outputs (name, unit, description, source): one home in fmu_bearing.life
+RATING_OUTPUTS, LIFE_OUTPUTS = life.RATING_OUTPUTS, life.LIFE_OUTPUTS
 
 #: Integer parameters: (min, max); max None = the FMU's per-ball capacity
 _INTEGER_RANGES = {"n_balls": (3, None), "damping_model": (0, 2)}
@@ -90,7 +95,7 @@ class BooleanVariable(_TypeAttributes, Boolean):
 _INVALID_STATE = "__invalid_state__"
 
 
-class BallBearing(Fmi2Slave):
+class BallBearing(Fmi2Slave, BearingStepping):
     author = "bearing-cosim contributors"
     description = ("Deep-groove ball bearing with radial clearance (Xu et al., Mech. Mach. Theory 56, 2012): "
                    "force on the housing from the journal eccentricity, per-ball Hertz contact with damping")
@@ -100,11 +105,17 @@ class BallBearing(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name)  # errors even with logging off
+        # errors reach the host even with logging off
+        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name, kwargs.get("resources"))
         guard_pythonfmu_exit(self.resources)
-        release_on_free(self)                      # the last fmi2FreeInstance undoes the FMU's imports
-        self.capacity = read_capacity(self.resources)
+        try:
+            release_on_free(self)                  # the last fmi2FreeInstance undoes the FMU's imports
+            self.capacity = read_capacity(self.resources)
+        except Exception as err:                   # fmi2Instantiate returns NULL: say why, also with logging off
+            self._host_log(3, f"instantiation failed: {err!r}")
+            raise
         self._bearing = None                       # physics.BallBearing, built at exit of initialisation
+        self._life = None                          # life.LifeAccumulator, built at exit of initialisation
         self._pending_error = None                 # a refused call, reported by the next doStep
         self._terminated = False                   # fmi2Terminate was called: no more steps
         self._loads = [0.0] * self.capacity        # ball_load_k outputs (fixed list object: getters bind to it)
@@ -126,6 +137,17 @@ class BallBearing(Fmi2Slave):
         name, unit, desc = CAGE_ANGLE
         self._register(RealVariable, name, float(BearingParameters().cage_angle_start), desc, {"unit": unit},
                        causality=output, variability=cont, initial=calculated)
+        self._empty_life = life.LifeAccumulator(life.LoadRatings.of_bearing(BearingParameters()))
+        for name, unit, desc, field in RATING_OUTPUTS:
+            self._register(RealVariable, name, float(getattr(self._empty_life.ratings, field)), desc, {"unit": unit},
+                           causality=output, variability=discrete, initial=calculated)
+        # Life outputs are computed from the accumulator when read (not every step); the FMU state restores
+        # the accumulator itself, so their setters ignore the saved values. Weak: see weak_accessors.
+        proxy = self.__dict__["_weak_self"]
+        for name, unit, desc, prop in LIFE_OUTPUTS:
+            self.register_variable(RealVariable(
+                name, type_attributes={"unit": unit}, description=desc, causality=output, variability=cont,
+                initial=calculated, getter=partial(life_output, proxy, prop), setter=ignore_value))
         # Parameters: one per BearingParameters field, with its default, unit and description;
         # the FMI type follows the default's Python type (bool -> Boolean, int -> Integer, else Real).
         for f in fields(BearingParameters):
@@ -187,6 +209,7 @@ class BallBearing(Fmi2Slave):
     def exit_initialization_mode(self):
         try:
             bearing = physics.BallBearing(self.parameters(), self.capacity)  # validates, names the parameter
+            accumulator = self._new_life(bearing.params)
             bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer)
             message = self._evaluate(float(bearing.params.cage_angle_start), bearing)
             if message is not None:
@@ -199,51 +222,23 @@ class BallBearing(Fmi2Slave):
             hold_before_raise(self)  # pythonfmu 0.7 over-releases objects on the exception path
             raise  # -> fmi2ExitInitializationMode returns fmi2Fatal (pythonfmu 0.7 has no route to fmi2Error)
         self._bearing = bearing
+        self._life = accumulator
+        self._publish_ratings(accumulator.ratings)
         inputs = (Fmi2Causality.input,)
         self._real_set = self._setters(Real, inputs)   # fixed parameters and outputs are read-only now
         self._int_set = self._setters(Integer, inputs)
         self._bool_set = self._setters(Boolean, inputs)
 
     def do_step(self, current_time, step_size):
-        bearing = self._bearing
-        if bearing is None or self._pending_error is not None:
-            reason = self._pending_error or ("the instance was terminated (fmi2Terminate)" if self._terminated
-                                             else "the instance is not initialised")
-            self._pending_error = None
-            return self._refuse_step(current_time, reason)
-        w_i, w_o = self.omega_inner, self.omega_outer
-        try:
-            bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, w_i, w_o)
-        except physics.BearingInputError as err:
-            return self._refuse_step(current_time, err)
-        if not step_size >= 0.0:
-            return self._refuse_step(current_time, f"step size {step_size!r} is not >= 0")
-        message = self._evaluate(bearing.advance_cage(self.cage_angle, w_i, w_o, step_size), bearing)
-        if message is not None:
-            return self._refuse_step(current_time, message)
+        # BearingStepping: check inputs, advance the cage, evaluate, add the end-of-step loads to the life
+        reason = self._advance(step_size)
+        if reason is not None:
+            self._error(f"doStep at t = {current_time!r} s refused: {reason}")
+            return False  # pythonfmu 0.7: fmi2Discard; the outputs keep the values of the last good step
         return True
 
     def terminate(self):
         self._terminated, self._bearing = True, None   # a later doStep is refused (fmi2Discard, logged)
-
-    def _refuse_step(self, current_time, reason):
-        self._error(f"doStep at t = {current_time!r} s refused: {reason}")
-        return False  # pythonfmu 0.7: fmi2Discard; the outputs keep the values of the last good step
-
-    def _evaluate(self, cage_angle, bearing):
-        """Outputs at ``cage_angle`` and the held inputs; on failure return a message and change nothing."""
-        try:
-            r = bearing.evaluate(self.e_x, self.e_y, self.v_x, self.v_y, cage_angle,
-                                 self.omega_inner, self.omega_outer, self._scratch)
-        except Exception as err:  # never let an exception reach pythonfmu's C++ side
-            return f"force law failed: {err!r}"
-        if not math.isfinite(r[0] + r[1] + r[2] + r[3] + r[4] + r[5] + r[6] + r[7] + r[9] + cage_angle):
-            return f"non-finite force law result {tuple(r)} (inputs out of any physical range)"
-        (self.F_x, self.F_y, self.stiffness_xx, self.stiffness_xy, self.stiffness_yy,
-         self.damping_xx, self.damping_xy, self.damping_yy, self.loaded_balls, self.max_ball_load) = r
-        self.cage_angle = cage_angle
-        self._loads[:] = self._scratch
-        return None
 
     def _error(self, message):
         """An error message to the host: directly (category logStatusError, also with logging off), else
@@ -304,7 +299,13 @@ class BallBearing(Fmi2Slave):
         self._pending_error = self._pending_error or msg
         return value
 
-    # --- FMU state: pythonfmu saves every registered variable (inputs, outputs incl. cage_angle, parameters)
+    # --- FMU state: pythonfmu saves every registered variable (inputs, outputs incl. cage_angle, parameters);
+    # the life accumulator's sums are added under LIFE_STATE
+    def _get_fmu_state(self):
+        state = super()._get_fmu_state()
+        state.update(self._life_state())
+        return state
+
     @staticmethod
     def _fmu_state_from_bytes(state):
         try:
@@ -313,16 +314,45 @@ class BallBearing(Fmi2Slave):
             return {_INVALID_STATE: f"fmi2DeSerializeFMUstate: not a serialized BallBearing state ({err!r})"}
 
     def _set_fmu_state(self, state):
-        if _INVALID_STATE in state:
-            self._error(state[_INVALID_STATE])
-            self._pending_error = self._pending_error or state[_INVALID_STATE]
+        """Restore a state after checking all of it (``fmu_bearing.slaves.state``); a state that is not ours
+        is refused with a logged error, the next doStep is refused, and nothing is assigned."""
+        try:
+            problem = self._state_problem(state)
+        except Exception as err:  # no exception may reach pythonfmu's C++ side
+            problem = f"not a BallBearing state ({err!r})"
+        if problem is not None:
+            message = f"setFMUstate refused: {problem}; the instance is unchanged"
+            self._error(message)
+            self._pending_error = self._pending_error or message
             return
-        super()._set_fmu_state(state)
-        if self._bearing is not None:
-            try:
-                params = self.parameters()
-                if params != self._bearing.params:  # a state of an instance with other parameters
-                    self._bearing = physics.BallBearing(params, self.capacity)
-            except Exception as err:
-                self._bearing = None
-                self._error(f"setFMUstate: the restored parameters are invalid: {err}")
+        for var in self.vars.values():
+            if var.setter is not None:
+                var.setter(state[var.name])
+        if self._life is not None:
+            self._life.restore(state.get(LIFE_STATE) or [])
+            self._publish_ratings(self._life.ratings)
+
+    def _state_problem(self, state):
+        """None if ``state`` is a complete, valid state of this instance, else what is wrong with it."""
+        if isinstance(state, dict) and _INVALID_STATE in state:
+            return str(state[_INVALID_STATE])
+        fixed = None
+        if self._bearing is not None:   # parameters are fixed once initialised: they must be this instance's
+            fixed = {name: getattr(self, name) for name in self._param_names}
+        kinds = variable_kinds(self)
+        kinds.update((name, "Real or inf") for name in life.LIFE_NAMES if name in kinds)   # an unloaded life
+        problem = check_state(state, kinds, "BallBearing", fixed, extra=(LIFE_STATE,))
+        if problem is not None:
+            return problem
+        if self._life is not None:   # the life accumulator's sums (same ratings: the parameters are fixed)
+            life.LifeAccumulator(self._life.ratings).restore(state.get(LIFE_STATE) or [])
+        params = BearingParameters(**{name: state[name] for name in self._param_names})
+        validate(params, self.capacity)
+        n = int(params.n_balls)
+        if not 0 <= state["loaded_balls"] <= n:
+            return f"loaded_balls = {state['loaded_balls']!r} is not in [0, n_balls = {n}]"
+        negative = [k for k in ["max_ball_load"] + [f"ball_load_{r + 1}" for r in range(self.capacity)]
+                    if state[k] < 0.0]
+        if negative:
+            return f"{negative[0]} = {state[negative[0]]!r} is negative"
+        return None

@@ -35,7 +35,8 @@ from fmu_bearing.clearance_joint import ClearanceParameters, ContactState
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
 from fmu_bearing.slaves import (HostLogger, add_initial_unknowns, add_unit_definitions, guard_pythonfmu_exit,
                                 hold_before_raise, release_on_free, weak_accessors)
-from fmu_bearing.slaves.ball_bearing_fmu import BooleanVariable, RealVariable
+from fmu_bearing.slaves.ball_bearing_fmu import _INVALID_STATE, BooleanVariable, RealVariable
+from fmu_bearing.slaves.state import check_state, variable_kinds
 
 #: (name, unit, description) of the inputs, in value-reference order: those of the BallBearing FMU
 #: (the ring speeds are unused here; present so the FMUs are drop-in replacements)
@@ -68,11 +69,17 @@ class JournalClearance(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name)  # errors even with logging off
+        # errors reach the host even with logging off
+        self._host_log = HostLogger(kwargs.get("logger"), self.instance_name, kwargs.get("resources"))
         guard_pythonfmu_exit(self.resources)     # pythonfmu 0.7's exit-time double free (fmu_bearing/slaves)
-        release_on_free(self)                      # the last fmi2FreeInstance undoes the FMU's imports
+        try:
+            release_on_free(self)                  # the last fmi2FreeInstance undoes the FMU's imports
+        except Exception as err:                   # fmi2Instantiate returns NULL: say why, also with logging off
+            self._host_log(3, f"instantiation failed: {err!r}")
+            raise
         self._joint = None                         # physics.ClearanceJoint, built at exit of initialisation
         self._terminated = False                   # fmi2Terminate was called: no more steps
+        self._pending_error = None                 # a refused setFMUstate, reported by the next doStep
         self._param_names = tuple(f.name for f in fields(ClearanceParameters))
         cont, fixed, discrete = Fmi2Variability.continuous, Fmi2Variability.fixed, Fmi2Variability.discrete
         for name, unit, desc in INPUTS:
@@ -136,6 +143,10 @@ class JournalClearance(Fmi2Slave):
 
     def do_step(self, current_time, step_size):
         joint = self._joint
+        if self._pending_error is not None:   # a refused setFMUstate
+            message, self._pending_error = self._pending_error, None
+            self._error(f"doStep at t = {current_time!r} s rejected: {message}")
+            return False
         if joint is None:
             self._error(f"doStep at t = {current_time!r} s rejected: "
                         + ("the instance was terminated (fmi2Terminate)" if self._terminated
@@ -194,9 +205,31 @@ class JournalClearance(Fmi2Slave):
         super().set_real(vrs, values)
 
     # --- FMU state: pythonfmu saves every registered variable (inputs, outputs incl. the contact state, parameters)
+    @staticmethod
+    def _fmu_state_from_bytes(state):
+        try:
+            return Fmi2Slave._fmu_state_from_bytes(state)
+        except Exception as err:  # no exception may reach pythonfmu's C++ side
+            return {_INVALID_STATE: f"not a serialized JournalClearance state ({err!r})"}
+
     def _set_fmu_state(self, state):
-        super()._set_fmu_state(state)
-        if self._joint is not None:
-            params = self.parameters()
-            if params != self._joint.params:  # a state of an instance with other parameters
-                self._joint = physics.ClearanceJoint(params)
+        """Restore a state after checking all of it (``fmu_bearing.slaves.state``); a state that is not ours
+        is refused with a logged error, the next doStep is refused, and nothing is assigned."""
+        try:
+            if isinstance(state, dict) and _INVALID_STATE in state:
+                problem = str(state[_INVALID_STATE])
+            else:
+                fixed = {n: getattr(self, n) for n in self._param_names} if self._joint is not None else None
+                problem = check_state(state, variable_kinds(self), "JournalClearance", fixed)
+                if problem is None:
+                    ClearanceParameters(**{n: float(state[n]) for n in self._param_names}).validate()
+        except Exception as err:  # no exception may reach pythonfmu's C++ side
+            problem = f"not a JournalClearance state ({err!r})"
+        if problem is not None:
+            message = f"setFMUstate refused: {problem}; the instance is unchanged"
+            self._error(message)
+            self._pending_error = self._pending_error or message
+            return
+        for var in self.vars.values():
+            if var.setter is not None:
+                var.setter(state[var.name])

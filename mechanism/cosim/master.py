@@ -335,4 +335,6 @@ def finish(rec: Recorder, info: dict, status: str, message: str, endpoint, bar, 
                     iteration_not_converged=it["not_converged"])
     if endpoint is not None:
         info["component_calls"] = endpoint.calls
+        if hasattr(endpoint, "life_outputs"):  # bearing rating life at the end (docs/bearing-life.md)
+            info["life_outputs"] = endpoint.life_outputs()
     return RunResult(rec.columns, rec.table().copy(), info, status, message)

@@ -1,17 +1,22 @@
 """Summary figures of a run and the files a person can open (CSV with units in the headers, JSON).
 
-The samples themselves are recorded by ``mechanism.cosim.record`` (``RunResult``).
+The samples themselves are recorded by ``mechanism.cosim.record`` (``RunResult``). Every file is
+written to a temporary name in its folder and renamed when complete, so a reader (or a full disk, or
+an interrupt) never sees a truncated file; ``output_lock`` keeps a second run out of a folder in use.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
 
 from ..cosim.record import RunResult, energy_summary, unit_of
+from .life import run_life
 
 
 def _figures(r: RunResult, mask: np.ndarray) -> dict:
@@ -43,21 +48,79 @@ def summary(r: RunResult) -> dict:
     energy = energy_summary(r)
     if energy is not None:
         result["energy"] = energy
+    result["life"] = run_life(r)     # bearing rating life (docs/bearing-life.md); None for other joints
     half = 0.5 * float(r.meta.get("output_interval_s") or 0.0) + 1e-12   # the step count is rounded
     if period and t[-1] >= 2 * period - half:
         rev2 = (t >= period - half) & (t <= 2 * period + half)
         result["rev2"] = _figures(r, rev2)
+        result["rev2"]["life"] = run_life(r, (period, 2 * period))
     return result
 
 
+class OutputFolderInUse(RuntimeError):
+    """Another run holds the lock on the output folder."""
+
+
+LOCK_NAME = ".run.lock"
+
+
+@contextlib.contextmanager
+def output_lock(out: Path):
+    """Hold an exclusive lock on the output folder ``out`` (created if missing) for the ``with`` block;
+    ``OutputFolderInUse`` at once if another process holds it. The lock file (``.run.lock``) stays."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    fd = os.open(out / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            import fcntl
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except ImportError:  # pragma: no cover - Windows
+            import msvcrt
+            msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
+    except OSError:
+        holder = os.read(fd, 64).decode(errors="replace").strip()
+        os.close(fd)
+        raise OutputFolderInUse(f"output folder {out} is in use by another run (pid {holder or '?'}); "
+                                f"choose another --out or wait") from None
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+        yield out
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_open(path: Path, mode: str = "w", **kwargs):
+    """``open(path, mode)`` on a temporary name beside ``path``, renamed to ``path`` when the block ends
+    without an exception (removed otherwise): ``path`` is either its old content or complete."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, mode, **kwargs) as f:
+            yield f
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
 def write_csv(r: RunResult, path: Path) -> None:
-    """timeseries.csv: one header row 'name [unit]', then one row per sample."""
+    """timeseries.csv: one header row 'name [unit]', then one row per sample (written atomically)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as f:
+    with atomic_open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow([f"{c} [{unit_of(c)}]" for c in r.columns])
         for row in r.data:
             w.writerow([f"{x:.10g}" for x in row])
+
+
+def write_json(data: dict, path: Path) -> None:
+    """``data`` as indented JSON (written atomically)."""
+    with atomic_open(path, "w") as f:
+        f.write(json.dumps(data, indent=2, default=float) + "\n")
 
 
 def read_csv(path: Path) -> RunResult:
@@ -69,21 +132,34 @@ def read_csv(path: Path) -> RunResult:
 
 
 def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, plots: bool = True) -> dict:
-    """timeseries.csv, summary.json (with the ideal joint's figures if given) and the PNG plots into ``out``."""
+    """timeseries.csv, summary.json (with the ideal joint's figures if given) and the PNG plots into ``out``.
+
+    Returns the figures of summary.json plus ``plots``, the PNG files written. If a CSV cannot be written
+    (a full disk) summary.json still is, with ``write_error``, and the OSError is raised.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    write_csv(result, out / "timeseries.csv")
     figures = summary(result)
+    try:
+        write_csv(result, out / "timeseries.csv")
+        if ideal is not None:
+            write_csv(ideal, out / "ideal_timeseries.csv")
+    except OSError as err:  # e.g. a full disk: keep at least the (small) summary, then report
+        figures["write_error"] = f"{err.strerror or err} writing {err.filename or out}"
+        with contextlib.suppress(OSError):
+            write_json(figures, out / "summary.json")
+        raise
     if ideal is not None:
-        write_csv(ideal, out / "ideal_timeseries.csv")
         figures["ideal"] = summary(ideal)
         if len(result["time"]) and len(ideal["time"]) >= len(result["time"]):
             k = len(result["time"])
             figures["rms_slider_acceleration_deviation_m_s2"] = float(
                 np.sqrt(np.mean((result["slider_a"] - ideal["slider_a"][:k]) ** 2)))
             figures["max_slider_position_error_m"] = float(np.max(np.abs(result["slider_x"] - ideal["slider_x"][:k])))
-    (out / "summary.json").write_text(json.dumps(figures, indent=2, default=float) + "\n")
+    write_json(figures, out / "summary.json")
+    plotted = []
     if plots and len(result["time"]) > 1:
         from mechanism.output.plots import plot_run
-        plot_run(result, out, ideal)
+        plotted = plot_run(result, out, ideal)
+    figures["plots"] = [str(p) for p in plotted]   # returned only (summary.json is written before the plots)
     return figures

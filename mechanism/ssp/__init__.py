@@ -13,12 +13,12 @@ from mechanism.ssp.reader import (Component, Connection, Connector, FmuVariable,
 from mechanism.ssp.system import (ARCHIVE_NAME, BEARING, BEARING_INPUTS, COMPONENTS, CONNECTIONS,
                                   COUPLING_OUTPUTS, DEFAULT_PARAMETER_SET, DEFAULT_STEP, DEFAULT_STOP,
                                   MECHANISM, PARAMETER_SETS, SOURCE_DIR, SOURCE_SSD, SSD_IN_ARCHIVE,
-                                  SYSTEM_NAME, ParameterSetSpec, SspError, parameter_units, ssv_path,
-                                  unit_definitions)
+                                  SSD_SUFFIX, SYSTEM_NAME, ParameterSetSpec, SspError, parameter_units,
+                                  ssv_path, unit_definitions, variant_ssd_name)
 
 __all__ = ["ARCHIVE_NAME", "BEARING", "BEARING_INPUTS", "COMPONENTS", "CONNECTIONS", "COUPLING_OUTPUTS",
            "Component", "Connection", "Connector", "DEFAULT_PARAMETER_SET", "DEFAULT_STEP", "DEFAULT_STOP",
            "FmuVariable", "MECHANISM", "PARAMETER_SETS", "ParameterSetSpec", "SOURCE_DIR", "SOURCE_SSD",
-           "SSD_IN_ARCHIVE", "SYSTEM_NAME", "SspError", "SspSystem", "check_component_parameters",
+           "SSD_IN_ARCHIVE", "SSD_SUFFIX", "SYSTEM_NAME", "SspError", "SspSystem", "check_component_parameters",
            "expected_files", "generate", "load_ssp", "pack", "parameter_units", "ssv_path",
-           "unit_definitions", "validate_schema"]
+           "unit_definitions", "validate_schema", "variant_ssd_name"]

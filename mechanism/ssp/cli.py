@@ -19,6 +19,7 @@ rpm and gravity -> the slider-crank, the BallBearing FMU from the archive), so t
 from __future__ import annotations
 
 import csv
+import os
 import sys
 from pathlib import Path
 
@@ -27,7 +28,7 @@ import numpy as np
 from mechanism import ssp as sm
 
 from mechanism.ssp.config import DEFAULT_ARCHIVE
-from mechanism.ssp.tools import RECORD, TOOLS, simulate_with
+from mechanism.ssp.tools import RECORD, TOOLS, ToolRunFailed, simulate_with
 
 
 def cmd_generate(args) -> int:
@@ -61,8 +62,9 @@ def cmd_pack(args) -> int:
     else:
         fmus = build_fmus(args.fmu_dir, args.max_balls)
     path = sm.pack(out, fmus)
-    print(f"packed {path} ({path.stat().st_size / 1024:.0f} kB): parameter sets "
-          f"{', '.join(s.name for s in sm.PARAMETER_SETS)} (default {sm.DEFAULT_PARAMETER_SET})")
+    print(f"packed {path} ({path.stat().st_size / 1024:.0f} kB): default parameter set "
+          f"{sm.DEFAULT_PARAMETER_SET} (SystemStructure.ssd), variants "
+          f"{', '.join(sm.variant_ssd_name(s.name) for s in sm.PARAMETER_SETS[1:])}")
     return 0
 
 
@@ -71,20 +73,38 @@ def cmd_simulate(args) -> int:
         name = system.check_parameter_set(args.parameter_set)
         rpm = float(system.parameters(name)[system.component_of_model("SliderCrank").name]["rpm"])
     t_end = args.t_end if args.t_end is not None else args.revs * 60.0 / rpm
-    result = simulate_with(args.tool, args.ssp, name, args.step, t_end)
     out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    keys = ["time", *RECORD]
-    with out.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(keys)
-        for row in zip(*(result[k] for k in keys)):
-            w.writerow([repr(float(v)) for v in row])
+    if out.is_dir():
+        raise ValueError(f"--out {out} is a folder, not a CSV file")
+    try:
+        result = simulate_with(args.tool, args.ssp, name, args.step, t_end)
+    except ToolRunFailed as err:   # a refused or diverged run: the rows before it, and a non-zero exit
+        _write_rows(out, err.result)
+        print(f"error: {err} ({len(err.result['time'])} steps up to then written to {out})", file=sys.stderr)
+        return 1
+    _write_rows(out, result)
     peak = float(np.max(np.hypot(result["bearing.F_x"], result["bearing.F_y"])))
     emax = float(np.max(np.hypot(result["mechanism.e_x"], result["mechanism.e_y"])))
     print(f"{args.tool}: {name}, {len(result['time'])} steps of {args.step:g} s to t = {t_end:.6g} s; "
           f"max |e| = {emax * 1e6:.3f} µm, peak |F| = {peak:.2f} N; wrote {out}")
     return 0
+
+
+def _write_rows(out: Path, result: dict) -> None:
+    """The recorded outputs as CSV (time and RECORD columns), written to a temporary name and renamed
+    when complete (``mechanism.output`` is above this package, so its ``atomic_open`` is not used here)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    keys = ["time", *RECORD]
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    try:
+        with tmp.open("w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(keys)
+            for row in zip(*(result[k] for k in keys)):
+                w.writerow([repr(float(v)) for v in row])
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def register(subparsers) -> None:
@@ -103,7 +123,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("ssp-simulate", help="run the SSP in another FMI tool (fmpy.ssp, libcosim, ecos)")
     p.add_argument("--tool", choices=TOOLS, default="fmpy")
     p.add_argument("--ssp", default=str(DEFAULT_ARCHIVE), help=f"SSP archive (default {DEFAULT_ARCHIVE})")
-    p.add_argument("--parameter-set", default=None, metavar="NAME", help="named parameter set (default: the first)")
+    p.add_argument("--parameter-set", default=None, metavar="NAME",
+                   help="named parameter set: the variant SSD NAME.ssd (default: the default SSD's set)")
     p.add_argument("--step", type=float, default=sm.DEFAULT_STEP, help="fixed communication step [s] (default 1e-5)")
     p.add_argument("--revs", type=float, default=0.2, help="crank revolutions (default 0.2)")
     p.add_argument("--t-end", type=float, default=None, help="end time [s] (instead of --revs)")

@@ -26,8 +26,9 @@ def add_ssp_arguments(parser: argparse.ArgumentParser) -> None:
                         help="take the FMU, connections and parameters from this SSP archive "
                              f"(e.g. {DEFAULT_ARCHIVE}; build it with `python -m mechanism ssp-pack`)")
     parser.add_argument("--parameter-set", default=None, metavar="NAME",
-                        help=f"named parameter set of the SSP (default: its first, {sm.DEFAULT_PARAMETER_SET}; "
-                             f"sets: {', '.join(s.name for s in sm.PARAMETER_SETS)})")
+                        help=f"named parameter set of the SSP: the variant SSD NAME.ssd of the archive (default: "
+                             f"the default SSD's, {sm.DEFAULT_PARAMETER_SET}; sets: "
+                             f"{', '.join(s.name for s in sm.PARAMETER_SETS)})")
 
 
 def master_parameters(system: sm.SspSystem, parameter_set: str | None = None) -> tuple[str, dict, dict, sm.Component]:

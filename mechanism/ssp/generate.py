@@ -12,7 +12,7 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 
-from mechanism.ssp.system import (_q, COMPONENTS, CONNECTIONS, DEFAULT_STEP, DEFAULT_STOP, FMU_TYPE, PARAMETER_SETS, ParameterSetSpec, SOURCE_DIR, SOURCE_SSD, SSD_IN_ARCHIVE, SSV_TYPE, SYSTEM_NAME, SspError, _interfaces, parameter_units, ssv_path, unit_definitions)
+from mechanism.ssp.system import (_q, COMPONENTS, CONNECTIONS, DEFAULT_PARAMETER_SET, DEFAULT_STEP, DEFAULT_STOP, FMU_TYPE, PARAMETER_SETS, ParameterSetSpec, SOURCE_DIR, SOURCE_SSD, SSD_IN_ARCHIVE, SSD_SUFFIX, SSV_TYPE, SYSTEM_NAME, SspError, _interfaces, parameter_units, ssv_path, unit_definitions, variant_ssd_name)
 
 
 def _format(value) -> tuple[str, str]:
@@ -64,13 +64,17 @@ def ssv_text(spec: ParameterSetSpec, component: str) -> str:
     return _to_text(root)
 
 
-def ssd_text() -> str:
-    """The System Structure Description: components, connectors, connections, parameter bindings, units."""
+def ssd_text(spec: ParameterSetSpec | None = None) -> str:
+    """The System Structure Description with ONE parameter binding per component, that of ``spec`` (default:
+    the default set): components, connectors, connections, parameter bindings, units."""
+    spec = spec or PARAMETER_SETS[0]
     definitions = unit_definitions()
+    variant = "" if spec.name == DEFAULT_PARAMETER_SET else f" Variant SSD of parameter set {spec.name}."
     root = ET.Element(_q("ssd", "SystemStructureDescription"), {
         "version": "1.0", "name": SYSTEM_NAME,
         "description": "Slider-crank (Xu et al. 2012, Table 1) with a deep-groove ball bearing with clearance "
-                       "(Table 2) as the crank-rod joint: two FMUs coupled through force and tangent matrices",
+                       "(Table 2) as the crank-rod joint: two FMUs coupled through force and tangent matrices. "
+                       f"Parameter set: {spec.name} ({spec.description}).{variant}",
         "generationTool": _GENERATED})
     system = ET.SubElement(root, _q("ssd", "System"), {"name": SYSTEM_NAME})
     elements = ET.SubElement(system, _q("ssd", "Elements"))
@@ -86,9 +90,8 @@ def ssd_text() -> str:
             if unit:
                 used.add(unit)
         bindings = ET.SubElement(comp, _q("ssd", "ParameterBindings"))
-        for spec in PARAMETER_SETS:
-            ET.SubElement(bindings, _q("ssd", "ParameterBinding"), {
-                "type": SSV_TYPE, "source": ssv_path(spec.name, component)})
+        ET.SubElement(bindings, _q("ssd", "ParameterBinding"), {
+            "type": SSV_TYPE, "source": ssv_path(spec.name, component)})
     connections = ET.SubElement(system, _q("ssd", "Connections"))
     for start, start_con, end, end_con in CONNECTIONS:
         ET.SubElement(connections, _q("ssd", "Connection"), {
@@ -104,8 +107,11 @@ def ssd_text() -> str:
 
 
 def expected_files() -> dict[str, str]:
-    """Every generated file of ssp/, relative path -> text (what ``generate`` writes)."""
+    """Every generated file of ssp/, relative path -> text (what ``generate`` writes): the default SSD, one
+    variant SSD per other parameter set, and the .ssv files."""
     files = {SOURCE_SSD.name: ssd_text()}
+    for spec in PARAMETER_SETS[1:]:
+        files[variant_ssd_name(spec.name)] = ssd_text(spec)
     for spec in PARAMETER_SETS:
         for component in COMPONENTS:
             files[ssv_path(spec.name, component)] = ssv_text(spec, component)
@@ -125,8 +131,9 @@ def generate(dest: str | Path = SOURCE_DIR) -> list[Path]:
 
 
 def pack(out: str | Path, fmus: dict[str, str | Path], source: str | Path = SOURCE_DIR) -> Path:
-    """Pack the SSD of ``source`` (as SystemStructure.ssd), its .ssv files and the FMUs (model name -> path)
-    into the archive ``out``; the archive is checked with ``load_ssp`` before it replaces ``out``."""
+    """Pack the SSD of ``source`` (as SystemStructure.ssd), its variant SSDs (``<set>.ssd``), its .ssv files and
+    the FMUs (model name -> path) into the archive ``out``; the archive is checked with ``load_ssp`` (every
+    variant) before it replaces ``out``."""
     source, out = Path(source), Path(out)
     ssd = source / SOURCE_SSD.name
     if not ssd.is_file():
@@ -138,6 +145,9 @@ def pack(out: str | Path, fmus: dict[str, str | Path], source: str | Path = SOUR
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
         z.write(ssd, SSD_IN_ARCHIVE)
+        variants = sorted(p for p in source.glob(f"*{SSD_SUFFIX}") if p.name != ssd.name)
+        for variant in variants:
+            z.write(variant, variant.name)
         for ssv in sorted((source / "resources").rglob("*.ssv")):
             z.write(ssv, ssv.relative_to(source).as_posix())
         for model, path in sorted(fmus.items()):
@@ -146,6 +156,9 @@ def pack(out: str | Path, fmus: dict[str, str | Path], source: str | Path = SOUR
     try:
         with load_ssp(tmp):
             pass
+        for variant in variants:
+            with load_ssp(tmp, variant.name[:-len(SSD_SUFFIX)]):
+                pass
     except Exception:
         tmp.unlink(missing_ok=True)
         raise

@@ -13,12 +13,13 @@ import os
 import shutil
 import tempfile
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 from xml.etree import ElementTree as ET
 
 
-from mechanism.ssp.system import (_q, FMU_TYPE, NS, SSD_IN_ARCHIVE, SspError)
+from mechanism.ssp.system import (_q, FMU_TYPE, NS, SOURCE_SSD, SSD_IN_ARCHIVE, SSD_SUFFIX, SspError,
+                                  variant_ssd_name)
 
 
 @dataclass(frozen=True)
@@ -63,12 +64,14 @@ class Component:
     variables: dict[str, FmuVariable]
     parameter_sets: dict[str, dict[str, object]]     # set name -> {parameter: value}, in binding order
     parameter_files: dict[str, str]                  # set name -> .ssv path relative to the SSD
+    values: dict[str, object] = field(default_factory=dict)  # every binding applied in order (SSP 1.0)
 
 
 @dataclass
 class SspSystem:
-    """A checked SSP: components, connections and parameter sets. Close it (or use ``with``) to
-    remove the folder an archive was unpacked into."""
+    """A checked SSP: components, connections and the parameter set of the SSD read (the default SSD or a
+    variant). ``parameter_set_names``: that set first, then the archive's other sets. Close it (or use
+    ``with``) to remove the folder an archive was unpacked into."""
 
     file: Path
     name: str
@@ -78,6 +81,7 @@ class SspSystem:
     step_size: float | None
     stop_time: float | None
     workdir: Path | None = None
+    ssd: str = SSD_IN_ARCHIVE           # the SSD read, relative to the archive (or its folder)
 
     def component_of_model(self, model_name: str) -> Component:
         for c in self.components.values():
@@ -87,24 +91,23 @@ class SspSystem:
                                               f"(components: {', '.join(f'{c.name} ({c.model_name})' for c in self.components.values())})")
 
     def parameters(self, set_name: str | None = None) -> dict[str, dict[str, object]]:
-        """component -> {parameter: value} of the named set (default: the first binding of each component)."""
-        name = self.check_parameter_set(set_name)
-        return {c.name: dict(c.parameter_sets.get(name, {})) for c in self.components.values()}
+        """component -> {parameter: value}: every binding of the SSD read applied in order (SSP 1.0).
+        ``set_name``, if given, must be the set of that SSD (``check_parameter_set``)."""
+        self.check_parameter_set(set_name)
+        return {c.name: dict(c.values) for c in self.components.values()}
 
     def check_parameter_set(self, set_name: str | None) -> str:
-        """The set's name (the default for None); an SspError if a component does not bind it."""
-        if set_name is None:
-            if not self.parameter_set_names:
-                raise SspError(self.file, "ParameterBindings", "the system binds no parameter set")
-            return self.parameter_set_names[0]
-        for c in self.components.values():
-            if c.parameter_sets and set_name not in c.parameter_sets:
-                raise SspError(self.file, f"ParameterBindings of component '{c.name}'",
-                               f"no parameter set named {set_name!r} (sets: {', '.join(c.parameter_sets)})")
-        if set_name not in self.parameter_set_names:
-            raise SspError(self.file, "ParameterBindings", f"no parameter set named {set_name!r} "
-                                                           f"(sets: {', '.join(self.parameter_set_names)})")
-        return set_name
+        """The name of the SSD's parameter set (``set_name`` or None); an SspError naming the sets otherwise."""
+        if not self.parameter_set_names:
+            raise SspError(self.file, "ParameterBindings", "the system binds no parameter set")
+        active = self.parameter_set_names[0]
+        if set_name is None or set_name == active:
+            return active
+        if set_name in self.parameter_set_names:
+            raise SspError(self.file, self.ssd, f"binds parameter set {active!r}, not {set_name!r}: "
+                                                f"read the variant with load_ssp(path, {set_name!r})")
+        raise SspError(self.file, "ParameterBindings", f"no parameter set named {set_name!r} "
+                                                       f"(sets: {', '.join(self.parameter_set_names)})")
 
     def close(self) -> None:
         if self.workdir is not None:
@@ -134,7 +137,14 @@ def validate_schema(path: Path, schema: str, shown: str | Path | None = None) ->
         raise SspError(shown, "XML", f"not well-formed: {err}") from None
     xsd = etree.XMLSchema(file=str(_schema_dir() / schema))
     if not xsd.validate(doc):
-        problems = "; ".join(f"line {e.line}: {e.message}" for e in list(xsd.error_log)[:3])
+        # name the element a violation lies in (Parameter 'n_balls', Component 'bearing', ...)
+        named = [(el.sourceline, f"{etree.QName(el).localname} {el.get('name')!r}")
+                 for el in doc.iter() if isinstance(el.tag, str) and el.get("name") is not None]
+
+        def where(line):
+            inside = [label for start, label in named if start is not None and start <= line]
+            return f" ({inside[-1]})" if inside else ""
+        problems = "; ".join(f"line {e.line}{where(e.line)}: {e.message}" for e in list(xsd.error_log)[:3])
         raise SspError(shown, f"schema {schema}", f"does not validate: {problems}")
 
 
@@ -238,17 +248,35 @@ def check_component_parameters(shown: str, component: Component, values: dict) -
                 raise SspError(shown, f"Parameter '{name}'", f"value {values[name]!r} out of range: must be positive")
 
 
+def resolve_inside(base: Path, reference: str | None, shown, element: str, what: str) -> Path:
+    """``reference`` (a component's or a ParameterBinding's ``source``) as a path inside ``base`` (the
+    unpacked archive, or the folder of an .ssd): absolute paths, URIs and ``..`` are refused, so an SSP
+    can never make us open a file outside itself."""
+    if not reference:
+        raise SspError(shown, element, f"no {what} source")
+    rel = PurePosixPath(reference.replace("\\", "/"))
+    if rel.is_absolute() or ":" in reference or ".." in rel.parts:
+        raise SspError(shown, element, f"{what} source {reference!r} must be a relative path inside the "
+                                       f"SSP (absolute paths, URIs and '..' are refused)")
+    target = (base / rel).resolve()
+    root = base.resolve()
+    if root not in target.parents:
+        raise SspError(shown, element, f"{what} source {reference!r} resolves outside the SSP ({target})")
+    return target
+
+
 def load_ssp(path: str | Path, parameter_set: str | None = None) -> SspSystem:
     """Read and check an .ssp archive (or an .ssd whose resources lie beside it) before any simulation.
 
-    ``parameter_set``: if given, it must be bound to every component. Raises SspError naming the file,
-    the element and the problem.
+    ``parameter_set``: None or the default set reads the default SSD (``SystemStructure.ssd``, or the .ssd
+    given); another name reads the variant ``<name>.ssd`` beside it. Raises SspError naming the file, the
+    element and the problem (an unknown set: the sets there are).
     """
     path = Path(path)
     if not path.exists():
         raise SspError(path, "file", "not found")
     workdir = None
-    if path.suffix.lower() == ".ssd":
+    if path.suffix.lower() == SSD_SUFFIX:
         ssd, base, shown = path, path.parent, lambda rel: path.parent / rel
     else:
         if not zipfile.is_zipfile(path):
@@ -266,6 +294,10 @@ def load_ssp(path: str | Path, parameter_set: str | None = None) -> SspSystem:
             z.extractall(workdir)
         ssd, base = workdir / SSD_IN_ARCHIVE, workdir
         shown = lambda rel: f"{path}!/{PurePosixPath(rel)}"  # noqa: E731
+    if parameter_set is not None:
+        variant = base / variant_ssd_name(parameter_set)
+        if variant.is_file() and variant.resolve() != ssd.resolve():
+            ssd = variant
     try:
         return _load(path, ssd, base, shown, workdir, parameter_set)
     except BaseException:
@@ -287,7 +319,7 @@ def _load(path, ssd, base, shown, workdir, parameter_set) -> SspSystem:
         element = f"Component '{name}'"
         if node.get("type", FMU_TYPE) != FMU_TYPE:
             raise SspError(ssd_shown, element, f"type {node.get('type')!r} is not supported (FMUs only)")
-        fmu = (base / source).resolve()
+        fmu = resolve_inside(base, source, ssd_shown, element, "FMU")
         if not fmu.is_file():
             raise SspError(ssd_shown, element, f"missing FMU resource: {source} is not in the "
                                                f"{'archive' if workdir else 'folder'} (build the FMUs and pack: "
@@ -317,7 +349,7 @@ def _load(path, ssd, base, shown, workdir, parameter_set) -> SspSystem:
                 raise SspError(ssd_shown, belement, "inline ParameterValues are not supported: use a .ssv source")
             if b.get("prefix"):
                 raise SspError(ssd_shown, belement, "a prefix is not supported")
-            ssv = base / src
+            ssv = resolve_inside(base, src, ssd_shown, belement, "parameter file")
             if not ssv.is_file():
                 raise SspError(ssd_shown, belement, f"missing parameter file {src}")
             set_name, values = _read_ssv(str(shown(src)), ssv, comp)
@@ -326,6 +358,7 @@ def _load(path, ssd, base, shown, workdir, parameter_set) -> SspSystem:
             check_component_parameters(str(shown(src)), comp, values)
             comp.parameter_sets[set_name] = values
             comp.parameter_files[set_name] = src
+            comp.values.update(values)   # SSP 1.0: every binding is applied, in order
     connections = []
     inputs_connected: dict[tuple[str, str], Connection] = {}
     for c in _children(system, "ssd:Connections/ssd:Connection"):
@@ -359,11 +392,20 @@ def _load(path, ssd, base, shown, workdir, parameter_set) -> SspSystem:
             raise SspError(ssd_shown, element, f"input {key[0]}.{key[1]} is already connected")
         inputs_connected[key] = con
         connections.append(con)
-    names: list[str] = []
-    for comp in components.values():
-        for set_name in comp.parameter_sets:
-            if set_name not in names:
-                names.append(set_name)
+    unconnected = [f"{comp.name}.{v.name}" for comp in components.values() for v in comp.variables.values()
+                   if v.causality == "input" and (comp.name, v.name) not in inputs_connected]
+    if unconnected:
+        raise SspError(ssd_shown, "Connections", f"unconnected inputs: {', '.join(unconnected)} "
+                                                 f"(every input of every component must be connected)")
+    last = {c.name: list(c.parameter_sets)[-1] for c in components.values() if c.parameter_sets}
+    if len(set(last.values())) > 1:
+        raise SspError(ssd_shown, "ParameterBindings", "the components end with different parameter sets "
+                       f"({', '.join(f'{k}: {v}' for k, v in last.items())}); bind one set per SSD and put "
+                       "the others into variant SSDs")
+    names = list(dict.fromkeys(last.values()))
+    for other in _other_ssds(base, ssd):
+        if other not in names:
+            names.append(other)
     step = stop = None
     experiment = root.find(_q("ssd", "DefaultExperiment"))
     if experiment is not None:
@@ -371,7 +413,28 @@ def _load(path, ssd, base, shown, workdir, parameter_set) -> SspSystem:
         fixed = experiment.find(f".//{_q('osp', 'FixedStepAlgorithm')}")
         if fixed is not None and fixed.get("baseStepSize"):
             step = float(fixed.get("baseStepSize"))
-    result = SspSystem(Path(path), system.get("name"), components, connections, names, step, stop, workdir)
+    result = SspSystem(Path(path), system.get("name"), components, connections, names, step, stop, workdir,
+                       ssd.relative_to(base).as_posix())
     if parameter_set is not None:
         result.check_parameter_set(parameter_set)
     return result
+
+
+def _other_ssds(base: Path, ssd: Path) -> list[str]:
+    """Names of the parameter sets of the other SSDs beside ``ssd``: a variant's is its file name, the
+    default SSD's (SystemStructure.ssd, or ssp/'s source SSD) that of its first binding's .ssv."""
+    names = []
+    for other in sorted(base.glob(f"*{SSD_SUFFIX}")):
+        if other.resolve() == ssd.resolve():
+            continue
+        if other.name not in (SSD_IN_ARCHIVE, SOURCE_SSD.name):
+            names.append(other.name[:-len(SSD_SUFFIX)])
+            continue
+        try:
+            binding = ET.parse(other).getroot().find(f".//{_q('ssd', 'ParameterBinding')}")
+            source = binding.get("source") if binding is not None else None
+            if source and (base / source).is_file():
+                names.insert(0, ET.parse(base / source).getroot().get("name"))
+        except ET.ParseError:
+            pass  # the default SSD is checked when it is read
+    return [n for n in names if n]

@@ -6,10 +6,12 @@ ring speeds to the bearing; force and tangent matrices back) and the named param
 ``PARAMETER_SETS`` (the paper's studies). ``mechanism.ssp.generate`` writes them as files,
 ``mechanism.ssp.reader`` reads and checks an archive.
 
-Parameter sets follow the convention of libcosim and ecos: each component has one ParameterBinding
-per named set, whose .ssv file carries the set's name and every parameter of that component; a tool
-applies the bindings of the selected name (libcosim without a name: each component's first binding,
-which is the default set ``DEFAULT_PARAMETER_SET``).
+Parameter sets follow SSP 1.0, which applies every ParameterBinding of an element in order (a later
+one overriding an earlier one): the default SSD (``SystemStructure.ssd`` in the archive) binds ONE set per
+component, the default ``DEFAULT_PARAMETER_SET``; every other set is a variant SSD of the same archive,
+``<set name>.ssd`` beside it, identical but for its bindings. Each binding's .ssv carries the set's name and
+every parameter of that component, so a set is complete on its own and every conforming tool ends with the
+same values (``load_ssp(path, name)`` reads the variant).
 """
 from __future__ import annotations
 
@@ -36,6 +38,7 @@ SYSTEM_NAME = "SliderCrankBearing"
 SOURCE_SSD = SOURCE_DIR / f"{SYSTEM_NAME}.ssd"
 ARCHIVE_NAME = f"{SYSTEM_NAME}.ssp"
 SSD_IN_ARCHIVE = "SystemStructure.ssd"   # the default SSD of an SSP archive (SSP 1.0, 5.3)
+SSD_SUFFIX = ".ssd"                      # variant SSDs: <set name>.ssd beside it (SSP 1.0, 5.3: variants)
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 SSV_TYPE = "application/x-ssp-parameter-set"
 #: communication step of the SSD's default experiment (libcosim reads it from the OSP annotation) [s]
@@ -142,3 +145,8 @@ def parameter_units(component: str) -> dict[str, str]:
 def _q(prefix: str, tag: str) -> str:
     """The qualified XML tag ``{namespace}tag`` of an SSP element."""
     return f"{{{NS[prefix]}}}{tag}"
+
+
+def variant_ssd_name(set_name: str) -> str:
+    """File name of the variant SSD of a parameter set (in the archive's root and in ssp/)."""
+    return f"{set_name}{SSD_SUFFIX}"

@@ -60,6 +60,7 @@ from fmu_bearing.slaves import (
 from fmu_bearing.slaves.ball_bearing_fmu import BooleanVariable as _Boolean
 from fmu_bearing.slaves.ball_bearing_fmu import IntegerVariable as _Integer
 from fmu_bearing.slaves.ball_bearing_fmu import RealVariable as _Real
+from fmu_bearing.slaves.state import check_state, finite_rows, variable_kinds
 from mechanism.cosim.coupling import (
     Exchanged,
     InterfaceJacobian,
@@ -320,29 +321,57 @@ class SliderCrank(Fmi2Slave):
         return state
 
     def _set_fmu_state(self, state):
-        state = dict(state)
-        if "_invalid" in state:
-            self._error(state["_invalid"])
-            self._pending_error = self._pending_error or state["_invalid"]
+        """Restore a state after checking all of it (``fmu_bearing.slaves.state``): the registered variables,
+        the mechanism state, the published outputs and the coupling history. A state that is not ours is
+        refused with a logged error, the next doStep is refused, and nothing is assigned."""
+        try:
+            problem = self._state_problem(state)
+        except Exception as err:  # no exception may reach pythonfmu's C++ side
+            problem = f"not a SliderCrank state ({err!r})"
+        if problem is not None:
+            message = f"setFMUstate refused: {problem}; the instance is unchanged"
+            self._error(message)
+            self._pending_error = self._pending_error or message
             return
-        y = state.pop("_y", None)
-        published = state.pop("_published", None)
-        history = state.pop("_history", None)
-        super()._set_fmu_state(state)
-        if y is not None and self._system is not None:
-            if len(y) != 2 * self._n:
-                self._error(f"setFMUstate: a state of {len(y)} values is not a SliderCrank state")
-                self._pending_error = "setFMUstate: not a SliderCrank state"
-                return
-            self._y = np.array(y, float)
-        if published is not None:
-            self._published = [tuple(p) for p in published]
-        if history is not None and self._system is not None:
+        for var in self.vars.values():
+            if var.setter is not None:
+                var.setter(state[var.name])
+        self._published = [tuple(p) for p in state["_published"]]
+        if self._system is not None:
+            self._y = np.array(state["_y"], float)
             self._scheme.past.clear()
-            for x in history:
+            for x in state["_history"]:
                 self._scheme.push(Exchanged(*x))
             if self._scheme.past:
                 self._scheme.begin_step(self._scheme.past[-1].t, 0.0)
+
+    def _state_problem(self, state):
+        """None if ``state`` is a complete, valid state of this instance, else what is wrong with it."""
+        if isinstance(state, dict) and "_invalid" in state:
+            return str(state["_invalid"])
+        started = self._system is not None
+        fixed = None
+        if started:   # parameters and settings are fixed once initialised
+            fixed = {v.name: getattr(self, v.name) for v in self.vars.values()
+                     if v.causality == Fmi2Causality.parameter}
+        problem = check_state(state, variable_kinds(self), "SliderCrank", fixed,
+                              extra=("_y", "_published", "_history"))
+        if problem is not None:
+            return problem
+        missing = [k for k in ("_y", "_published", "_history") if k not in state]
+        if missing:
+            return f"not a SliderCrank state: no value for {missing[0]!r}"
+        y, width = state["_y"], len(fields(Exchanged))
+        if started and not finite_rows([y], 2 * self._n, 1):
+            return f"_y is not the mechanism state of {2 * self._n} finite numbers"
+        if not started and y is not None:
+            return "a state of an initialised instance cannot be set before initialisation"
+        if not finite_rows(state["_published"], 4, 2):
+            return "_published is not a list of at most two (e_x, e_y, v_x, v_y) rows of finite numbers"
+        history = state["_history"]
+        if not finite_rows(history, width, self._scheme.past.maxlen if started else 0):
+            return f"_history is not a list of coupling records ({width} finite numbers each)"
+        return None
 
     @staticmethod
     def _fmu_state_from_bytes(state):

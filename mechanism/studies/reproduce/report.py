@@ -7,7 +7,8 @@ own numbers (axis ranges of its figures, converted from its kg-mm-s units) are t
 ``PAPER``.  Never edit the README by hand: rerun the command.
 
 The report is one ``Report`` assembled from mixins: ``SpeedFigures`` (Fig. 11-19), ``DesignFigures``
-(Fig. 20-25) and ``Sections`` (runs, units, stiffness variant, modelling choices)."""
+(Fig. 20-25), ``Sections`` (runs, units, stiffness variant, modelling choices) and ``LifeSection``
+(bearing rating life per operating point)."""
 from __future__ import annotations
 
 import time
@@ -22,10 +23,11 @@ from mechanism.studies.reproduce.analysis import (figures_of)  # noqa: E402
 from mechanism.studies.reproduce.cases import (BALL_COUNTS, SPEEDS, STUDY_RPM, paper_stiffness)  # noqa: E402
 from mechanism.studies.reproduce.figures_design import (DesignFigures)  # noqa: E402
 from mechanism.studies.reproduce.figures_speed import (SpeedFigures)  # noqa: E402
+from mechanism.studies.reproduce.life_table import (LifeSection)  # noqa: E402
 from mechanism.studies.reproduce.sections import (Sections)  # noqa: E402
 
 
-class Report(SpeedFigures, DesignFigures, Sections):
+class Report(SpeedFigures, DesignFigures, Sections, LifeSection):
     """The generated README of the reproduction: figures, measured values and each claim's check."""
 
     def __init__(self, out: Path, specs, outcome: dict):
@@ -85,6 +87,7 @@ class Report(SpeedFigures, DesignFigures, Sections):
           "fmpy; the ideal-joint runs use the same master with the ideal revolute joint and no component.")
         w()
         self.section_runs()
+        self.section_life()
         self.section_units()
         self.section_figures()
         self.section_stiffness()

@@ -29,7 +29,9 @@ def cmd_stepsize(args) -> int:
         replot(config_from_args(args))
         print(f"rewrote {args.out}/stepsize_summary.json, stepsize_summary.md and plots from stepsize.csv")
         return 0
-    result = run_study(config_from_args(args))
+    config = config_from_args(args)
+    check_physical_cases(config)
+    result = run_study(config)
     print(f"wrote {result.out}/stepsize.csv, stepsize_summary.json, stepsize_summary.md and plots "
           f"({len(result.rows)} cases, {result.wall_time:.0f} s)")
     for g, info in result.summary["groups"].items():
@@ -39,6 +41,34 @@ def cmd_stepsize(args) -> int:
                   f"within 1 %: {_fmt(e['largest_step_within_1pct_s'])}, order {o:.2f}" if o is not None else
                   f"  {g} {scheme:15s} largest stable step {_fmt(e['largest_stable_step_s'])}, "
                   f"within 1 %: {_fmt(e['largest_step_within_1pct_s'])}, order —")
+    return exit_status(result.rows)
+
+
+def check_physical_cases(config: StudyConfig) -> None:
+    """Before any run: each (rpm, balls, settings) must make a valid run (``RunConfig``'s ranges and the
+    bearing's validation); ValueError naming the cause otherwise."""
+    import itertools
+
+    from mechanism.run import RunConfig
+    for rpm, balls, settings in itertools.product(config.rpms, config.balls, config.settings):
+        RunConfig(rpm=rpm, balls=balls, settings=dict(settings), revs=config.revs, fmu=config.fmu,
+                  step=config.output_interval, output_interval=config.output_interval, progress=False)
+
+
+def exit_status(rows: list[dict]) -> int:
+    """1 (with the causes on stderr) when no case could run at all: every case not skipped for its cost
+    is an error or failed at its first step; 0 otherwise (an unstable scheme is a result, not an error)."""
+    import sys
+
+    from mechanism.studies.stepsize.cases import ERROR, FAILED, SKIPPED
+    ran = [r for r in rows if r["status"] != SKIPPED]
+    broken = [r for r in ran if r["status"] == ERROR or (r["status"] == FAILED and not r.get("steps"))]
+    if ran and len(broken) == len(ran):
+        causes = list(dict.fromkeys(" ".join(str(r["message"]).split()) for r in broken))
+        print(f"error: none of the {len(ran)} cases could run: {causes[0]}"
+              + (f" (and {len(causes) - 1} other causes; see stepsize.csv)" if len(causes) > 1 else ""),
+              file=sys.stderr)
+        return 1
     return 0
 
 

@@ -1,0 +1,110 @@
+"""Resident-memory growth of long-lived hosts (issue 14): instantiate/free cycles and load/unload cycles.
+
+    python benchmarks/fmu_memory.py [--fmu dist/BallBearing.fmu] [--instances 1000] [--loads 200]
+
+* instantiate/free: one fmpy ``FMU2Slave`` (one loaded binary), ``instantiate``, initialise, a few
+  ``doStep``s, ``terminate``, ``fmi2FreeInstance`` -- repeated (fmpy's ``freeInstance()`` would also
+  unload the library);
+* load/unload: a new ``FmuEndpoint`` each cycle (reads the FMU, loads its binary, instantiates,
+  initialises, steps, closes) -- what a study or a service that runs many cases in one process does.
+
+Each phase warms up for a few cycles first (Python's and the allocator's first-use growth is not a
+leak), then prints the resident set size before and after, the growth and the growth per cycle. The
+targets of issue 14 are <= 5 MB for 1,000 instantiate/free cycles and <= 10 MB for 200 load/unload
+cycles; ``tests/test_fuzz.py::test_memory_growth`` runs shorter versions of both.
+"""
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+INPUTS = (1.2e-5, -0.4e-5, 1e-3, 0.0, 125.0, 0.0)
+
+
+def rss_mb() -> float:
+    """Resident set size of this process [MB] (Linux /proc)."""
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def instantiate_free(fmu: Path, cycles: int, warmup: int = 20) -> tuple[float, float]:
+    """(RSS before, RSS after) ``cycles`` instantiate/initialise/step/free cycles on one loaded binary."""
+    from fmpy import read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    from mechanism.cosim.endpoints import shared_extraction
+    md = read_model_description(str(fmu))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    inputs = [vr[n] for n in ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")]
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=shared_extraction(fmu, md.guid),
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="memory")
+
+    def cycle():
+        slave.instantiate()
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.setReal(inputs, list(INPUTS))
+        slave.exitInitializationMode()
+        for k in range(3):
+            slave.doStep(k * 1e-5, 1e-5)
+        slave.getReal([vr["F_x"], vr["F_y"]])
+        slave.terminate()
+        slave.fmi2FreeInstance(slave.component)   # fmpy's freeInstance() would also unload the library
+
+    for _ in range(warmup):
+        cycle()
+    gc.collect()
+    before = rss_mb()
+    for _ in range(cycles):
+        cycle()
+    gc.collect()
+    return before, rss_mb()
+
+
+def load_unload(fmu: Path, cycles: int, warmup: int = 10) -> tuple[float, float]:
+    """(RSS before, RSS after) ``cycles`` FmuEndpoint create/initialise/step/close cycles."""
+    from mechanism.cosim.endpoints import FmuEndpoint
+
+    def cycle():
+        endpoint = FmuEndpoint(fmu, {"n_balls": 8})
+        try:
+            endpoint.initialize(INPUTS)
+            for k in range(3):
+                endpoint.exchange(k * 1e-5, 1e-5, INPUTS)
+        finally:
+            endpoint.close()
+
+    for _ in range(warmup):
+        cycle()
+    gc.collect()
+    before = rss_mb()
+    for _ in range(cycles):
+        cycle()
+    gc.collect()
+    return before, rss_mb()
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--fmu", default="dist/BallBearing.fmu")
+    parser.add_argument("--instances", type=int, default=1000)
+    parser.add_argument("--loads", type=int, default=200)
+    args = parser.parse_args()
+    fmu = Path(args.fmu)
+    for label, func, n, target in (("instantiate/free", instantiate_free, args.instances, 5.0),
+                                   ("load/unload (FmuEndpoint)", load_unload, args.loads, 10.0)):
+        before, after = func(fmu, n)
+        growth = after - before
+        print(f"{label}: {n} cycles, RSS {before:.1f} -> {after:.1f} MB, growth {growth:.2f} MB "
+              f"({growth * 1024 / n:.1f} kB per cycle; target <= {target:g} MB: "
+              f"{'met' if growth <= target else 'NOT met'})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,85 @@
+"""Bearing rating life of a run (issue 16): the figures summary.json and the studies report.
+
+The physics is ``fmu_bearing.life`` (one home). The master keeps the component's life outputs at
+the end of a run (BallBearing FMU, or the in-process endpoint's accumulator) in ``meta["life_outputs"]``,
+so a co-simulation's life is the FMU's final outputs (``life_from_outputs``); runs without them (the
+monolithic reference, or a window of any run) accumulate the recorded ball loads with the same
+``LifeAccumulator`` (``life_from_samples``): the loads of sample k held over (t_{k-1}, t_k], which is the
+FMU's own rule when samples are taken every communication step.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fmu_bearing.life import LIFE_OUTPUTS, RATING_OUTPUTS, LifeAccumulator, LoadRatings, output_values
+from fmu_bearing.parameters import BearingParameters, from_values
+
+#: FMU life output -> summary key (unit in the key, as the other summary figures)
+OUTPUT_KEYS = {name: f"{name.replace('_revolutions', '')}_{unit}" for name, unit, _, _ in RATING_OUTPUTS + LIFE_OUTPUTS}
+
+
+def figures(acc: LifeAccumulator, source: str, window: tuple[float, float]) -> dict:
+    """The summary figures of an accumulator (an infinite life is written as JSON Infinity)."""
+    out = {"source": source, "window_s": [float(window[0]), float(window[1])]}
+    out.update(zip(OUTPUT_KEYS.values(), output_values(acc)))
+    out["mean_relative_speed_rpm"] = acc.speed * 60.0
+    return out
+
+
+def life_from_samples(result, params: BearingParameters, t_start: float = -math.inf,
+                      t_end: float = math.inf) -> LifeAccumulator:
+    """Accumulate the recorded ball loads of ``result`` (a RunResult) over the window [t_start, t_end]."""
+    acc = LifeAccumulator(LoadRatings.of_bearing(params), params.reliability_factor)
+    t = result["time"]
+    names = [f"ball_load_{r + 1}" for r in range(int(params.n_balls))]
+    if len(t) < 2 or not all(result.has(n) for n in names):
+        return acc
+    loads = np.column_stack([result[n] for n in names])
+    w_i, w_o = result["omega_inner"], result["omega_outer"]
+    for k in range(1, len(t)):
+        lo, hi = max(t[k - 1], t_start), min(t[k], t_end)
+        if hi > lo and np.all(np.isfinite(loads[k])):
+            acc.add(loads[k].tolist(), float(w_i[k]), float(w_o[k]), float(hi - lo))
+    return acc
+
+
+def life_from_outputs(result) -> dict | None:
+    """The component's life outputs at the end of the run (BallBearing FMU, or the in-process endpoint's
+    accumulator; the master keeps them in ``meta["life_outputs"]``), or None if it has none."""
+    values = result.meta.get("life_outputs")
+    if not values or len(result["time"]) == 0:
+        return None
+    out = {"source": "component outputs", "window_s": [float(result["time"][0]), float(result["time"][-1])]}
+    out.update({key: float(values[name]) for name, key in OUTPUT_KEYS.items() if name in values})
+    return out
+
+
+def run_parameters(result) -> BearingParameters | None:
+    """The bearing parameters of a ball-bearing run from its meta data (None for other joints)."""
+    config = result.meta.get("config") or {}
+    if config.get("joint", "bearing") != "bearing":
+        return None
+    settings = dict(config.get("settings") or {})
+    if config.get("balls") is not None:
+        settings["n_balls"] = int(config["balls"])
+    try:
+        return from_values(settings)
+    except ValueError:
+        return None
+
+
+def run_life(result, window: tuple[float, float] | None = None) -> dict | None:
+    """Life figures of a ball-bearing run: over the whole run the component's final outputs if it has them,
+    else (and over a ``window`` [s]) the recorded ball loads accumulated; None for other joints."""
+    if window is None:
+        out = life_from_outputs(result)
+        if out is not None:
+            return out
+    params = run_parameters(result)
+    if params is None or not result.ball_load_columns or len(result["time"]) < 2:
+        return None
+    t = result["time"]
+    window = window or (float(t[0]), float(t[-1]))
+    return figures(life_from_samples(result, params, *window), "recorded samples", window)
