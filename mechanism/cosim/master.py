@@ -19,6 +19,11 @@ A failure (an error status from the component, a non-finite state, constraints d
 beyond ``max_constraint_violation``) stops the run with a message naming the step, the
 time and the cause; the samples recorded so far are kept and the component is always freed.
 
+An iterative scheme (``jacobian-implicit``, the default) repeats steps 2-3 with rollback until the
+end-of-step exchange converges (``CouplingLoop.communicate``; the component's state is restored by
+its get/set FMU state). An energy account (``mechanism.cosim.energy``), if given, adds its columns
+to every sample.
+
 The step itself (1-3) and the sample (4) live in ``CouplingLoop``, shared with the adaptive
 driver (``mechanism.cosim.adaptive``), which also uses its ``snapshot``/``restore`` to roll back.
 """
