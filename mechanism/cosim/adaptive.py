@@ -29,10 +29,11 @@ is reached exactly (samples need no interpolation, H <= output_interval) and the
 rarely: the default scheme's drift term d_n is estimated over the previous step and extrapolated
 over the next one, which favours piecewise-constant steps.
 
-The coupling inside is the default scheme (``jacobian-drift``, ``mechanism.cosim.coupling``); each step
-is ``master.CouplingLoop.advance``, the same code the fixed-step master runs.
+The coupling inside is the run's scheme (``settings.scheme``, default ``jacobian-implicit``,
+``mechanism.cosim.coupling``); each step is ``master.CouplingLoop.communicate``, the same code the
+fixed-step master runs (an iterative scheme repeats each of the three steps with its own rollback).
 
-Cost per attempt: three component steps (one of H, two of H/2), one get-state and one set-state
+Cost per attempt (non-iterative scheme): three component steps (one of H, two of H/2), one get-state and one set-state
 (two on rejection); ``meta`` reports accepted and rejected steps, mean/min/max accepted step H
 (the state advances with two H/2 steps per accepted H), component calls and state saves/restores.
 
