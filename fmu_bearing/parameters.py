@@ -80,8 +80,9 @@ class BearingParameters:
         return self.eccentricity_limit if self.eccentricity_limit > 0 else 0.05 * self.ball_diameter
 
 
-#: documented physical range [min, max] of each number (poisson_ratio: (0, 0.5), checked in ``validate``) (SI; docs/robustness.md): far beyond any real
-#: ball bearing, so that only absurd values (a stiffness of 1e300) are refused.
+#: documented physical range [min, max] of each number (SI; docs/robustness.md), far beyond any real ball
+#: bearing, so that only absurd values (a stiffness of 1e300) are refused; poisson_ratio's (0, 0.5) and the
+#: preload limit of radial_clearance are checked in ``validate`` with their reasons.
 RANGES = {
     "n_balls": (3, 1000),
     "ball_diameter": (1e-4, 1.0),
@@ -90,7 +91,7 @@ RANGES = {
     "outer_race_diameter": (1e-4, 10.0),
     "bore_diameter": (0.0, 10.0),
     "outside_diameter": (0.0, 10.0),
-    "radial_clearance": (0.0, 1e-2),
+    "radial_clearance": (-1e-2, 1e-2),              # preload: at most MAX_PRELOAD_FRACTION of D, below
     "youngs_modulus": (1e6, 1e13),
     "inner_groove_conformity": (-math.inf, 10.0),     # > 0.5: checked below with its reason
     "outer_groove_conformity": (-math.inf, 10.0),

@@ -1,4 +1,4 @@
-"""Command line: ``python -m mechanism run|reproduce|stepsize-study`` (also installed as ``bearing-cosim``)."""
+"""Command line: ``python -m mechanism SUBCOMMAND`` (also installed as ``bearing-cosim``); see ``DESCRIPTION``."""
 from __future__ import annotations
 
 import argparse
@@ -102,7 +102,8 @@ def cmd_run(args) -> int:
 
 
 #: modules that add a subcommand: each defines ``register(subparsers)`` (add_parser + set_defaults(func=...))
-SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.studies.life",
+SUBCOMMAND_MODULES = ("mechanism.studies.reproduce", "mechanism.studies.stepsize", "mechanism.studies.advise",
+                      "mechanism.studies.life",
                       "mechanism.ssp.cli")
 
 
@@ -113,11 +114,18 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
-def main(argv: list[str] | None = None) -> int:
+DESCRIPTION = ("Co-simulate the slider-crank of Xu et al. (2012) with its crank-rod joint as a ball-bearing FMU: "
+               "one run, the paper's Section 5, step-size studies and advice, and the system as SSP "
+               "(also installed as bearing-cosim). 'python -m mechanism SUBCOMMAND --help' describes each.")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser with every subcommand (each package's ``register`` adds its own)."""
     import importlib
-    parser = Parser(prog="python -m mechanism", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("run", help="simulate the paper's slider-crank once and write CSV, JSON and PNG")
+    parser = Parser(prog="python -m mechanism", description=DESCRIPTION)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="SUBCOMMAND")
+    text = "simulate the paper's slider-crank once and write CSV, JSON and PNG"
+    p = sub.add_parser("run", help=text, description=text[0].upper() + text[1:] + ".")
     add_run_arguments(p)
     from mechanism.ssp.config import add_ssp_arguments
     add_ssp_arguments(p)
@@ -133,6 +141,11 @@ def main(argv: list[str] | None = None) -> int:
                 raise
             continue
         module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     return call(args.func, args)
 

@@ -24,6 +24,9 @@ ALLOWED = {
                       "fmu_bearing", "build_fmu"},
     "mechanism.studies": {"mechanism.run", "mechanism.output", "mechanism.cosim", "mechanism.systems",
                           "mechanism.multibody", "fmu_bearing", "build_fmu"},
+    # the advisor is built on the step-size study's machinery (one way: stepsize does not import advise)
+    "mechanism.studies.advise": {"mechanism.run", "mechanism.output", "mechanism.cosim", "mechanism.systems",
+                                 "mechanism.multibody", "fmu_bearing", "build_fmu", "mechanism.studies.stepsize"},
     "mechanism.cli": {"mechanism"},
     "mechanism.__main__": {"mechanism.cli"},
     "mechanism": set(),

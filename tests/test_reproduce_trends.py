@@ -167,6 +167,11 @@ def test_command_writes_figures_and_report(tmp_path):
     for text in ("Fig. 11", "Fig. 25", "paper-units", "allow_ball_overlap", "oil_film_damping", "kg·mm·s",
                  "Baumgarte", "bearing-1200-20balls", "clearance-1200", "paperK-600"):
         assert text in readme, text
+    # criteria first, then a verdict for every figure (the start-up too), each in the summary table
+    assert readme.index("## Criteria of the verdicts") < readme.index("## Verdicts") < readme.index("### Fig. 11")
+    for fig in ("11", "12", "13", "14", "15", "16", "17–18", "19", "20", "21", "22", "23–24", "25"):
+        assert f"**Verdict (Fig. {fig}, " in readme and f"\n| Fig. {fig} | " in readme, fig
+    assert "**Verdict (Fig. 17–18, start-up" in readme and "Believed right:" in readme
     figures = {p.name for p in (out / "report" / "figures").glob("*.png")}
     for stem in ("fig11", "fig12", "fig13", "fig14", "fig15", "fig16", "fig17", "fig18", "fig19", "fig20",
                  "fig21", "fig22", "fig23_24", "fig25", "paperK"):

@@ -98,7 +98,7 @@ def test_adaptive_without_rejections_equals_the_fixed_step_at_half_the_step(ball
         assert np.max(np.abs(adaptive[c] - fixed[c])) <= 1e-6 * scale, c
 
 
-def test_unstable_step_is_reported_without_nan(tmp_path, cache, ball_bearing_fmu):
+def test_unstable_step_is_reported_without_nan(tmp_path, cache, ball_bearing_fmu, capsys):
     """zoh at 1e-5 s stops with the eccentricity limit: an 'unstable' row with its message; no NaN anywhere.
     Through the command line, which also writes the summaries and plots; a failing case is a row too."""
     from mechanism.cli import main
@@ -115,7 +115,18 @@ def test_unstable_step_is_reported_without_nan(tmp_path, cache, ball_bearing_fmu
     assert rows["jacobian-drift"]["status"] == st.STABLE
     assert float(rows["jacobian-drift"]["component_calls"]) == 500
     summary = (out / "stepsize_summary.md").read_text()
-    assert "| zoh | — | 1e-05 s |" in summary and "| jacobian-drift | 1e-05 s | — | 1e-05 s |" in summary
+    assert "| zoh | — | 1e-05 s |" in summary
+    # the only step tried is a bound, not a limit; errors in percent
+    assert ("| jacobian-drift | ≥ 1e-05 s (the largest step tried) | — | ≥ 1e-05 s (the largest step tried) | "
+            in summary) and "peak error there [%]" in summary
+    console = capsys.readouterr().out
+    assert "1 case(s) unstable (failed)" in console and "largest stable step ≥ 1e-05 s" in console
+    # every case failed: a non-zero exit, the cause on stderr, the files still written
+    code = main(["stepsize-study", "--rpm", "1200", "--revs", "0.1", "--steps", "1e-5", "--schemes", "zoh",
+                 "--fmu", str(ball_bearing_fmu), "--reference-cache", str(cache), "--workers", "1", "--quiet",
+                 "--no-plots", "--out", str(tmp_path / "allfail")])
+    assert code == 1 and "every case failed" in capsys.readouterr().err
+    assert (tmp_path / "allfail" / "stepsize.csv").is_file()
     assert (out / "stepsize_error_vs_step_1200rpm.png").stat().st_size > 0
     assert (out / "stepsize_error_vs_walltime_1200rpm.png").stat().st_size > 0
     # a case that cannot run (no such FMU) is a row with its error, not the end of the sweep

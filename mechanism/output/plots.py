@@ -43,65 +43,140 @@ def plot_trajectory(ax, r: RunResult, label: str | None = None, clearance: bool 
     ax.grid(alpha=0.3)
 
 
+def n_balls(r: RunResult) -> int:
+    """The number of balls of the run (its configuration, else the FMU's default)."""
+    config = r.meta.get("config", {})
+    n = config.get("balls") or (config.get("settings") or {}).get("n_balls")
+    return int(n) if n else BearingParameters().n_balls
+
+
+def run_title(r: RunResult) -> str:
+    """Speed, joint, and for the ball bearing its ball count, damping and clearance (from the run's configuration)."""
+    config = r.meta.get("config", {})
+    rpm = config.get("rpm")
+    head = f"{rpm:g} rpm" if isinstance(rpm, (int, float)) else "run"
+    joint = config.get("joint", "bearing")
+    if joint == "ideal":
+        return f"{head}, ideal joint"
+    settings = dict(config.get("settings") or {})
+    if joint == "clearance":
+        return f"{head}, journal clearance c = {half_clearance(r) * 1e6:.3g} µm"
+    try:
+        from fmu_bearing.parameters import from_values
+        values = dict(settings)
+        if config.get("balls"):
+            values["n_balls"] = config["balls"]
+        p = from_values(values)
+    except (ValueError, TypeError):
+        return f"{head}, {joint}"
+    damping = {0: "no damping", 1: f"C = {p.damping_coefficient:g} N·s/m per ball", 2: "oil-film damping"}
+    return (f"{head}, {p.n_balls} balls, {damping.get(p.damping_model, 'damping ?')}, "
+            f"P_d = {p.radial_clearance * 1e6:.3g} µm")
+
+
+#: the start-up panel shows the first START_REVS revolutions
+START_REVS = 0.1
+
+
+def windows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
+    """Masks of the start-up (first START_REVS revolutions) and of the steady part (the last whole
+    revolution, or the second half of a run shorter than two), and the latter's name; x in π rad."""
+    end = float(x[-1]) if len(x) else 0.0
+    start = x <= 2 * START_REVS
+    if end >= 4.0 - 1e-9:
+        lo = 2.0 * np.floor(end / 2.0 + 1e-9) - 2.0
+        return start, (x >= lo - 1e-9) & (x <= lo + 2.0 + 1e-9), f"revolution {int(lo / 2) + 1}"
+    return start, x >= end / 2, "second half of the run"
+
+
+def time_panels(rows: int = 1, height: float = 3.6):
+    """A figure of ``rows`` x 2 axes: a narrow start-up panel and a wide steady-revolution panel per row."""
+    fig, axes = plt.subplots(rows, 2, figsize=(11, height * rows), squeeze=False,
+                             gridspec_kw={"width_ratios": [1, 3]})
+    return fig, axes
+
+
+def plot_time(axes_row, x: np.ndarray, series: list[tuple[np.ndarray, np.ndarray, dict]], ylabel: str) -> None:
+    """Each (x, y, style) on the start-up panel (full scale) and the steady panel (its own scale)."""
+    start_ax, steady_ax = axes_row
+    for xs, ys, style in series:
+        start, steady, name = windows(xs)
+        start_ax.plot(xs[start], ys[start], **style)
+        steady_ax.plot(xs[steady], ys[steady], **style)
+    start_ax.set_title(f"start-up ({START_REVS:g} rev)", fontsize=9)
+    steady_ax.set_title(f"steady: {name}", fontsize=9)
+    start_ax.set_ylabel(ylabel)
+    for ax in axes_row:
+        ax.grid(alpha=0.3)
+
+
+def _label_x(axes_row) -> None:
+    for ax in axes_row:
+        ax.set_xlabel("crank angle [π rad]")
+
+
 def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None) -> list[Path]:
-    """The standard plots of a bearing (or ideal) run; the ideal joint drawn for comparison if given."""
+    """The standard plots of a bearing (or ideal) run; the ideal joint drawn for comparison if given.
+    Time plots have a start-up panel beside the steady revolution, so the start-up impacts do not set the
+    scale of the steady motion."""
     out = Path(out)
     paths = []
     x = crank_pi(r)
-    title = f"{r.meta.get('config', {}).get('rpm', '')} rpm, {r.meta.get('config', {}).get('joint', '')}"
+    title = run_title(r)
+    joint = r.meta.get("config", {}).get("joint", "run")
     bearing = r.has("e_x") and np.any(r["e_x"] != 0)
+
+    def series(col: str, scale: float = 1.0) -> list:
+        items = []
+        if ideal is not None and ideal.has(col):
+            items.append((crank_pi(ideal), ideal[col] * scale, {"color": "k", "lw": 1.0, "label": "ideal joint"}))
+        items.append((x, r[col] * scale, {"lw": 0.8, "label": joint}))
+        return items
 
     if bearing:
         fig, ax = plt.subplots(figsize=(5.5, 5))
         plot_trajectory(ax, r, "journal centre")
-        ax.set_title(f"Eccentricity trajectory ({title})")
+        ax.set_title(f"Eccentricity trajectory\n({title})", fontsize=10)
         ax.legend(fontsize=8)
         paths.append(_save(fig, out / "eccentricity.png"))
 
-    fig, ax = plt.subplots(figsize=(8, 4))
-    if ideal is not None:
-        ax.plot(crank_pi(ideal), ideal["slider_a"], "k", lw=1.0, label="ideal joint")
-    ax.plot(x, r["slider_a"], lw=0.7, label=r.meta.get("config", {}).get("joint", "run"))
-    ax.set_xlabel("crank angle [π rad]")
-    ax.set_ylabel("slider acceleration [m/s²]")
-    ax.set_title(f"Slider acceleration ({title})")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    paths.append(_save(fig, out / "slider_acceleration.png"))
+    for name, col, ylabel, heading in (
+            ("slider_acceleration.png", "slider_a", "slider acceleration [m/s²]", "Slider acceleration"),
+            ("crank_moment.png", "crank_moment", "crank moment [N·m]", "Driving moment for constant crank speed")):
+        fig, axes = time_panels()
+        plot_time(axes[0], x, series(col), ylabel)
+        _label_x(axes[0])
+        axes[0, 1].legend(fontsize=8)
+        fig.suptitle(f"{heading} ({title})", fontsize=10)
+        paths.append(_save(fig, out / name))
 
-    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-    for ax, col in zip(axes, ("F_x", "F_y")):
-        if ideal is not None:
-            ax.plot(crank_pi(ideal), ideal[col], "k", lw=1.0, label="ideal joint")
-        ax.plot(x, r[col], lw=0.7, label=r.meta.get("config", {}).get("joint", "run"))
-        ax.set_ylabel(f"joint force {col} [N]")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-    axes[0].set_title(f"Joint force on the crank (housing) ({title})")
-    axes[-1].set_xlabel("crank angle [π rad]")
+    fig, axes = time_panels(2, 3.0)
+    for row, col in zip(axes, ("F_x", "F_y")):
+        plot_time(row, x, series(col), f"joint force {col} [N]")
+    _label_x(axes[-1])
+    axes[0, 1].legend(fontsize=8)
+    fig.suptitle(f"Joint force on the crank (housing) ({title})", fontsize=10)
     paths.append(_save(fig, out / "joint_force.png"))
 
-    fig, ax = plt.subplots(figsize=(8, 4))
-    if ideal is not None:
-        ax.plot(crank_pi(ideal), ideal["crank_moment"], "k", lw=1.0, label="ideal joint")
-    ax.plot(x, r["crank_moment"], lw=0.7, label=r.meta.get("config", {}).get("joint", "run"))
-    ax.set_xlabel("crank angle [π rad]")
-    ax.set_ylabel("crank moment [N·m]")
-    ax.set_title(f"Driving moment for constant crank speed ({title})")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    paths.append(_save(fig, out / "crank_moment.png"))
-
-    loads = r.ball_load_columns
+    loads = r.ball_load_columns[:n_balls(r)] if bearing else []
     if loads:
-        n = len(loads)
-        fig, axes = plt.subplots(n, 1, figsize=(8, 1.1 * n + 1), sharex=True, squeeze=False)
-        for ax, col in zip(axes[:, 0], loads):
-            ax.plot(x, r[col], lw=0.7)
+        cols = 1 if len(loads) <= 8 else 2
+        rows = -(-len(loads) // cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(8 * cols, 1.2 * rows + 1.2), sharex=True,
+                                 sharey=True, squeeze=False)
+        for k, col in enumerate(loads):
+            ax = axes[k % rows, k // rows]
+            start, steady, name = windows(x)
+            ax.plot(x[steady], r[col][steady], lw=0.7)
             ax.set_ylabel(col.replace("ball_load_", "ball "), fontsize=8)
             ax.grid(alpha=0.3)
-        axes[0, 0].set_title(f"Load on each ball [N] ({title})")
-        axes[-1, 0].set_xlabel("crank angle [π rad]")
+        for ax in axes[-1]:
+            ax.set_xlabel("crank angle [π rad]")
+        for k in range(len(loads), rows * cols):
+            axes[k % rows, k // rows].set_visible(False)
+        peak0 = max(float(np.max(r[c][windows(x)[0]])) if np.any(windows(x)[0]) else 0.0 for c in loads)
+        fig.suptitle(f"Load on each ball [N], {windows(x)[2]} (start-up peak {peak0:.3g} N not shown)\n({title})",
+                     fontsize=10)
         paths.append(_save(fig, out / "ball_loads.png"))
 
     if r.has("energy_residual"):
@@ -118,11 +193,10 @@ def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None) -> list[Pa
 
     if ideal is not None and len(ideal["time"]) >= len(r["time"]):
         k = len(r["time"])
-        fig, ax = plt.subplots(figsize=(8, 4))
-        ax.plot(x, (r["slider_x"] - ideal["slider_x"][:k]) * 1e6, lw=0.7)
-        ax.set_xlabel("crank angle [π rad]")
-        ax.set_ylabel("slider position error [µm]")
-        ax.set_title(f"Slider position minus the ideal joint's ({title})")
-        ax.grid(alpha=0.3)
+        fig, axes = time_panels()
+        plot_time(axes[0], x, [(x, (r["slider_x"] - ideal["slider_x"][:k]) * 1e6, {"lw": 0.8})],
+                  "slider position error [µm]")
+        _label_x(axes[0])
+        fig.suptitle(f"Slider position minus the ideal joint's ({title})", fontsize=10)
         paths.append(_save(fig, out / "slider_position_error.png"))
     return paths

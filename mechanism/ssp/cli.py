@@ -108,25 +108,29 @@ def _write_rows(out: Path, result: dict) -> None:
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("ssp-generate", help="write ssp/ (SSD and .ssv parameter sets) from the dataclass defaults")
+    text = "write ssp/ (SSD and .ssv parameter sets) from the dataclass defaults"
+    p = subparsers.add_parser("ssp-generate", help=text, description=text[0].upper() + text[1:] + ".")
     p.add_argument("--dest", default=str(sm.SOURCE_DIR), help="output folder (default: the project's ssp/)")
     p.add_argument("--check", action="store_true", help="only check that ssp/ matches the defaults (exit 1 if not)")
     p.set_defaults(func=cmd_generate)
 
-    p = subparsers.add_parser("ssp-pack", help=f"build the FMUs and pack {DEFAULT_ARCHIVE}")
+    text = f"build the FMUs and pack {DEFAULT_ARCHIVE} (SSD, .ssv parameter sets, FMUs)"
+    p = subparsers.add_parser("ssp-pack", help=text, description=text[0].upper() + text[1:] + ".")
     p.add_argument("--out", default=str(DEFAULT_ARCHIVE), help=f"archive to write (default {DEFAULT_ARCHIVE})")
     p.add_argument("--fmu-dir", default="dist", help="where the FMUs are built (default dist)")
     p.add_argument("--no-build", action="store_true", help="pack the FMUs already in --fmu-dir")
     p.add_argument("--max-balls", type=int, default=None, help="BallBearing per-ball output capacity")
     p.set_defaults(func=cmd_pack)
 
-    p = subparsers.add_parser("ssp-simulate", help="run the SSP in another FMI tool (fmpy.ssp, libcosim, ecos)")
-    p.add_argument("--tool", choices=TOOLS, default="fmpy")
+    text = "run the SSP in another FMI tool (fmpy.ssp, libcosim, ecos) and write a CSV"
+    p = subparsers.add_parser("ssp-simulate", help=text, description=text[0].upper() + text[1:] + ".")
+    p.add_argument("--tool", choices=TOOLS, default="fmpy",
+                   help="fmpy: fmpy.ssp; libcosim: libcosimpy; ecos: ecospy (fixed-step Jacobi masters; default fmpy)")
     p.add_argument("--ssp", default=str(DEFAULT_ARCHIVE), help=f"SSP archive (default {DEFAULT_ARCHIVE})")
     p.add_argument("--parameter-set", default=None, metavar="NAME",
                    help="named parameter set: the variant SSD NAME.ssd (default: the default SSD's set)")
     p.add_argument("--step", type=float, default=sm.DEFAULT_STEP, help="fixed communication step [s] (default 1e-5)")
     p.add_argument("--revs", type=float, default=0.2, help="crank revolutions (default 0.2)")
     p.add_argument("--t-end", type=float, default=None, help="end time [s] (instead of --revs)")
-    p.add_argument("--out", default="results/ssp/timeseries.csv", help="CSV to write")
+    p.add_argument("--out", default="results/ssp/timeseries.csv", help="CSV to write (default results/ssp/timeseries.csv)")
     p.set_defaults(func=cmd_simulate)

@@ -53,7 +53,7 @@ def cmd_life_study(args) -> int:
 def register(subparsers) -> None:
     p = subparsers.add_parser("life-study", help="bearing rating life vs radial clearance and crank speed (CSV, PNG)",
                               description=(__import__("mechanism.studies.life", fromlist=["x"]).__doc__ or "")
-                              .split("\n\n")[0])
+                              .split("\n\n")[0].replace("``", ""))
     p.add_argument("--out", default="results/life", help="output folder (default results/life)")
     p.add_argument("--clearances", default=None, metavar="LIST",
                    help="radial clearances [µm], comma-separated (default -15,-10,-6,-3,0,5,10,20,40,60,100)")

@@ -22,7 +22,8 @@ def cmd_reproduce(args) -> int:
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("reproduce", help="reproduce the paper's Section 5 (runs, figures, report)",
-                              description=__doc__.split("\n\n")[0])
+                              description="Reproduce Section 5 of Xu et al. (2012): run every case (cached), draw the figures "
+                                          "and write OUT/report/README.md with a verdict per figure.")
     p.add_argument("--out", default="results/reproduce", help="output folder (default results/reproduce)")
     p.add_argument("--force", action="store_true", help="recompute every run (ignore the cache)")
     p.add_argument("--workers", type=int, default=None, help="parallel runs (default: the number of cores)")

@@ -42,7 +42,8 @@ def fmt(x, digits=3) -> str:
 
 
 def verdict_word(ok: bool) -> str:
-    return "**agrees**" if ok else "**differs**"
+    """A check's outcome in the text (the figure's verdict is ``Report.verdict``)."""
+    return "*holds*" if ok else "*does not hold*"
 
 
 def increasing(values: list[float]) -> bool:

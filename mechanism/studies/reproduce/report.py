@@ -25,6 +25,7 @@ from mechanism.studies.reproduce.figures_design import (DesignFigures)  # noqa: 
 from mechanism.studies.reproduce.figures_speed import (SpeedFigures)  # noqa: E402
 from mechanism.studies.reproduce.life_table import (LifeSection)  # noqa: E402
 from mechanism.studies.reproduce.sections import (Sections)  # noqa: E402
+from mechanism.studies.reproduce.verdicts import Verdict, criteria_lines, summary_lines  # noqa: E402
 
 
 class Report(SpeedFigures, DesignFigures, Sections, LifeSection):
@@ -41,6 +42,7 @@ class Report(SpeedFigures, DesignFigures, Sections, LifeSection):
         self.outcome = outcome
         self.lines: list[str] = []
         self.missing: list[str] = []
+        self.verdicts: list[Verdict] = []
 
     # helpers
     def has(self, *names) -> bool:
@@ -55,6 +57,18 @@ class Report(SpeedFigures, DesignFigures, Sections, LifeSection):
 
     def w(self, text: str = "") -> None:
         self.lines.append(text)
+
+    def verdict(self, figure: str, window: str, checks: list[bool], criterion: str, believed: str = "") -> None:
+        """Record a figure's verdict (computed from ``checks``, see verdicts.result_of) and write its line."""
+        from mechanism.studies.reproduce.verdicts import STEADY, result_of
+        revs = min((spec.config.revs for spec in self.specs.values()), default=2.0)
+        if window == STEADY and revs < 2.0:
+            window = f"whole run ({revs:g} rev: no second revolution)"
+        v = Verdict(figure, window, result_of(checks), criterion, believed)
+        self.verdicts.append(v)
+        self.w(f"**Verdict ({figure}, {window}): {v.result}.** Criterion: {criterion}."
+               + (f" *Believed right:* {believed}" if believed else ""))
+        self.w()
 
     def figure(self, fname: str, caption: str) -> None:
         self.w(f"![{caption}](figures/{fname})")
@@ -86,21 +100,25 @@ class Report(SpeedFigures, DesignFigures, Sections, LifeSection):
           "of the Python multibody master with a bearing FMU (BallBearing, or JournalClearance for Fig. 23–25) through "
           "fmpy; the ideal-joint runs use the same master with the ideal revolute joint and no component.")
         w()
-        self.section_runs()
-        self.section_life()
-        self.section_units()
-        self.section_figures()
-        self.section_stiffness()
-        self.section_choices()
+        w("\n".join(criteria_lines()))
+        summary_at = len(self.lines)          # the verdict table goes here once every figure has its verdict
+        for section in self.sections():
+            section()
         if self.missing:
             w("## Missing runs")
             w()
             w("These runs were not part of this reproduction (a limited run list) or recorded no samples; the "
               "figures and checks that need them are left out: " + ", ".join(f"`{m}`" for m in self.missing) + ".")
             w()
+        self.lines[summary_at:summary_at] = summary_lines(self.verdicts)
         path = self.dir / "README.md"
         path.write_text("\n".join(self.lines) + "\n")
         return path
+
+    def sections(self) -> list:
+        """The report's sections in order (a study adds its own here, e.g. a life table)."""
+        return [self.section_runs, self.section_life, self.section_units, self.section_figures,
+                self.section_stiffness, self.section_choices]
 
     # ------------------------------------------------------------------------------------------
 
@@ -108,8 +126,9 @@ class Report(SpeedFigures, DesignFigures, Sections, LifeSection):
         w = self.w
         w("## Figures against the paper's claims")
         w()
-        w("Each figure is followed by the paper's claim (quoted briefly) and whether our runs agree, with the "
-          "numbers that decide it. Default model: SI Hertz stiffness, constant damping (see the modelling choices).")
+        w("Each figure is followed by the paper's claim (quoted briefly), our numbers with the checks they pass or "
+          "fail, and the figure's verdict from the criteria above. Default model: SI Hertz stiffness, constant damping "
+          "(see the modelling choices).")
         w()
         for fn in (self.fig11, self.fig12, self.fig13, self.fig14, self.fig15, self.fig16, self.fig17_18,
                    self.fig19, self.fig20, self.fig21, self.fig22, self.fig23_24, self.fig25):

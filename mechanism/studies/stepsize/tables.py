@@ -64,6 +64,7 @@ def summarize(rows: list[dict], config: StudyConfig) -> dict:
                 "cases": len(rs), "ran": len(ran), "stable": sum(r["status"] == STABLE for r in rs),
                 "skipped": sum(r["status"] == SKIPPED for r in rs), "errors": sum(r["status"] == ERROR for r in rs),
                 "largest_stable_step_s": _largest_ok(rs, lambda r: r["status"] == STABLE),
+                "largest_step_tried_s": max((r["step"] for r in ran if r.get("step")), default=None),
                 "smallest_unstable_step_s": unstable[0] if unstable else None,
                 "largest_step_within_1pct_s": largest_1pct,
                 "peak_error_at_that_step": at.get(PEAK_METRIC) if at else None,
@@ -118,6 +119,19 @@ def _fmt(x, unit: str = "s") -> str:
     return f"{x:.3g}" + (f" {unit}" if unit else "")
 
 
+def _pct(x) -> str:
+    """A relative error (fraction) in percent."""
+    return "—" if x is None else f"{100 * x:.3g} %"
+
+
+def step_limit(e: dict, key: str) -> str:
+    """A largest step, marked as a lower bound ("≥ h, the largest step tried") when nothing larger ran."""
+    h, top = e.get(key), e.get("largest_step_tried_s")
+    if h is not None and top is not None and h >= top:
+        return f"≥ {_fmt(h)} (the largest step tried)"
+    return _fmt(h)
+
+
 def summary_markdown(summary: dict, config: StudyConfig) -> str:
     lines = ["# Co-simulation step-size study", "",
              f"Mode `{config.mode}`, {config.revs:g} revolutions, output interval {config.output_interval:g} s, "
@@ -129,10 +143,11 @@ def summary_markdown(summary: dict, config: StudyConfig) -> str:
     for g, info in summary["groups"].items():
         floors = next(iter(info["schemes"].values()))["reference_floor"]
         lines += [f"## {g}", "", f"Window {info['window_s'][0]:.4g} .. {info['window_s'][1]:.4g} s. Reference floor "
-                  f"(rtol vs rtol/10): force {_fmt(floors['force_max_rel'], '')}, "
-                  f"eccentricity {_fmt(floors['ecc_max_rel'], '')} (max relative).", "",
+                  f"(rtol vs rtol/10, max pointwise): joint force {_pct(floors['force_max_rel'])}, "
+                  f"eccentricity {_pct(floors['ecc_max_rel'])}.", "",
                   "| scheme | largest stable step | smallest unstable step | largest step with peak error ≤ 1 % "
-                  "| peak error there | largest step with pointwise force error ≤ 1 % | observed order (force) "
+                  "| peak error there [%] (worse of peak joint force and max eccentricity) "
+                  "| largest step with pointwise joint-force error ≤ 1 % | observed order (force) "
                   "| points, step range | cheapest run within 1 % (peak) |",
                   "|---|---|---|---|---|---|---|---|---|"]
         for scheme, e in info["schemes"].items():
@@ -146,18 +161,19 @@ def summary_markdown(summary: dict, config: StudyConfig) -> str:
                 tol = e.get("largest_tol_within_1pct")
                 largest = f"tol {tol:g} (mean step {_fmt(e['largest_step_within_1pct_s'])})" if tol else "—"
             else:
-                largest = _fmt(e["largest_step_within_1pct_s"])
-            lines.append(f"| {scheme} | {_fmt(e['largest_stable_step_s'])} | {_fmt(e['smallest_unstable_step_s'])} | "
-                         f"{largest} | {_fmt(e['peak_error_at_that_step'], '')} | "
-                         f"{_fmt(e['largest_step_within_1pct_pointwise_s'])} | {order} | {rng} | {cheap_s} |")
+                largest = step_limit(e, "largest_step_within_1pct_s")
+            lines.append(f"| {scheme} | {step_limit(e, 'largest_stable_step_s')} | {_fmt(e['smallest_unstable_step_s'])} | "
+                         f"{largest} | {_pct(e['peak_error_at_that_step'])} | "
+                         f"{step_limit(e, 'largest_step_within_1pct_pointwise_s')} | {order} | {rng} | {cheap_s} |")
         ad = info["schemes"].get(ADAPTIVE)
         if ad:
             lines += ["", "Adaptive (step doubling, rollback): tolerance against error", "",
-                      "| tol | mean step | accepted | rejected | max rel. force error | peak error | status |",
+                      "| tol | mean step | accepted | rejected | max pointwise joint-force error [%] "
+                      "| peak error [%] (peak joint force, max eccentricity) | status |",
                       "|---|---|---|---|---|---|---|"]
             for r in ad["tolerance_vs_error"]:
                 lines.append(f"| {r['tol']:g} | {_fmt(r['mean_step_s'])} | {r['accepted']} | {r['rejected']} | "
-                             f"{_fmt(r['err_force_max_rel'], '')} | {_fmt(r[PEAK_METRIC], '')} | {r['status']} |")
+                             f"{_pct(r['err_force_max_rel'])} | {_pct(r[PEAK_METRIC])} | {r['status']} |")
         lines.append("")
     lines += ["Plots: `stepsize_error_vs_step_<group>.png` (errors against the step, log-log, with the fitted "
               "order and the stability limit), `stepsize_error_vs_walltime_<group>.png`.", ""]

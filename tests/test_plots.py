@@ -1,0 +1,51 @@
+"""The run plots read as the issue asks: one panel per actual ball, the steady revolution on its own scale
+beside a start-up panel, titles with speed, ball count, damping and clearance."""
+import numpy as np
+
+from mechanism.cosim.record import RunResult
+from mechanism.output import plots
+
+
+def fake_run(balls: int, capacity: int = 20, revs: float = 2.0) -> RunResult:
+    """Two revolutions at 1200 rpm with a start-up spike 100x the steady force, and `capacity` ball columns."""
+    t = np.linspace(0.0, revs * 0.05, 2001)
+    angle = 2 * np.pi * t / 0.05
+    force = 100 * np.cos(angle) + np.where(t < 0.002, 1e4, 0.0)
+    cols = {"time": t, "crank_angle": angle, "e_x": 1e-5 * np.cos(angle), "e_y": 1e-5 * np.sin(angle),
+            "F_x": force, "F_y": force / 2, "slider_x": 0.1 + 0 * t, "slider_a": force, "crank_moment": force / 10}
+    for k in range(1, capacity + 1):
+        cols[f"ball_load_{k}"] = np.maximum(0.0, np.cos(angle - k)) * 50 if k <= balls else 0 * t
+    meta = {"config": {"rpm": 1200.0, "joint": "bearing", "balls": balls, "settings": {"damping_coefficient": 80.0}},
+            "clearance_per_side_m": 1e-5}
+    return RunResult(list(cols), np.column_stack(list(cols.values())), meta)
+
+
+def test_plots_one_panel_per_ball_steady_scale_and_full_titles(tmp_path, monkeypatch):
+    saved = {}
+
+    def keep(fig, path):
+        saved[path.name] = ([ax for ax in fig.axes if ax.get_visible()], fig._suptitle.get_text()
+                            if fig._suptitle else fig.axes[0].get_title())
+        fig.savefig(path, dpi=30)
+        return path
+
+    monkeypatch.setattr(plots, "_save", keep)
+    plots.plot_run(fake_run(8), tmp_path)
+    axes, title = saved["ball_loads.png"]
+    assert len(axes) == 8
+    for name in ("ball_loads.png", "joint_force.png", "slider_acceleration.png", "eccentricity.png"):
+        text = saved[name][1]
+        assert "1200 rpm" in text and "8 balls" in text and "C = 80 N·s/m" in text and "P_d = 20 µm" in text, text
+    # the steady panel's scale is the steady force's (100 N), not the start-up spike's (1e4 N)
+    axes, _ = saved["slider_acceleration.png"]
+    start, steady = axes
+    assert steady.get_ylim()[1] < 200 and start.get_ylim()[1] > 5e3
+    assert "revolution 2" in steady.get_title()
+    plots.plot_run(fake_run(15), tmp_path)
+    assert len(saved["ball_loads.png"][0]) == 15
+
+
+def test_windows_for_short_runs_use_the_second_half():
+    x = np.linspace(0, 1.0, 101)   # half a revolution, in π rad
+    start, steady, name = plots.windows(x)
+    assert name == "second half of the run" and steady.sum() == 51 and start[0] and not start[-1]
