@@ -1,73 +1,130 @@
-"""Co-simulation cost: two crank revolutions at 1200 rpm at the default step (issue 3).
+"""Co-simulation cost per communication step against the FMU exchange it exists to perform (issue 11).
 
-Prints, measured in one run (ratios matter; this machine is shared and noisy):
-wall time of `cosim` (BallBearing.fmu through fmpy) and of the same master with the force
-law in-process (same scheme, same step) and their ratio; µs per communication step of the
-master alone and of the component exchange; the monolithic reference's wall time.
+Prints, measured in one run (this machine is shared: compare the ratios, and run it more than once):
 
-    python benchmarks/cosim.py [--revs 2] [--rpm 1200] [--step 1e-5]
+* the bare fmpy exchange on BallBearing.fmu: a loop of ``setReal`` (6 inputs) + ``doStep`` +
+  ``getReal`` (8 coupling outputs) with prebuilt ctypes arrays, µs per call;
+* the co-simulation loop (``python -m mechanism run``'s master with the FMU), µs per communication step,
+  and its ratio to the bare exchange (target <= 3);
+* the same loop with the force law in-process, µs per step (target <= 15 µs on the development machine);
+* the same loop with the ideal joint (no bearing), µs per step;
+* the wall time of the headline command ``python -m mechanism run`` (warm: the FMU built, the kernels
+  compiled and cached; CSV and plots included; target <= 3 s);
+* with ``--cold``, the wall time of the first run in a fresh numba cache (the compile, target <= 15 s).
+
+Each loop figure is the median of ``--repeat`` runs, interleaved so that load changes hit them alike.
+
+    python benchmarks/cosim.py [--revs 2] [--rpm 1200] [--step 1e-5] [--repeat 3] [--cold]
+
+Runs against whatever ``mechanism`` is on the path (PYTHONPATH=<checkout> for a before/after pair;
+``--cold`` needs the compiled master).
 """
 from __future__ import annotations
 
 import argparse
+import ctypes
+import math
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 from mechanism import run as run_module
-from mechanism.cosim.endpoints import FmuEndpoint, InProcessEndpoint
 from mechanism.run import RunConfig, run
 
 
-def timed_exchange(cls):
-    """Subclass whose exchange() accumulates its own wall time."""
+def bare_exchange_us(fmu: Path, calls: int = 10_000) -> float:
+    """µs per setReal(6) + doStep + getReal(8) through fmpy's FMU2Slave with prebuilt ctypes arrays."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+    md = read_model_description(str(fmu))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    unzip = extract(str(fmu))
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName="bench")
+    slave.instantiate()
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    names_in = ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")
+    names_out = ("F_x", "F_y", "stiffness_xx", "stiffness_xy", "stiffness_yy", "damping_xx", "damping_xy",
+                 "damping_yy")
+    vr_in = (ctypes.c_uint * 6)(*(vr[n] for n in names_in))
+    vr_out = (ctypes.c_uint * 8)(*(vr[n] for n in names_out if n in vr))
+    val_in, val_out = (ctypes.c_double * 6)(), (ctypes.c_double * 8)()
+    h, t = 1e-5, 0.0
+    t0 = time.perf_counter()
+    for k in range(calls):
+        a = 0.01 * k
+        val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = (
+            3e-5 * math.cos(a), 3e-5 * math.sin(a), -0.01 * math.sin(a), 0.01 * math.cos(a), -52.0, 125.0)
+        slave.fmi2SetReal(slave.component, vr_in, 6, val_in)
+        slave.fmi2DoStep(slave.component, t, h, 1)
+        slave.fmi2GetReal(slave.component, vr_out, len(vr_out), val_out)
+        t += h
+    us = (time.perf_counter() - t0) / calls * 1e6
+    slave.terminate()
+    slave.freeInstance()
+    return us
 
-    class Timed(cls):
-        exchange_seconds = 0.0
 
-        def exchange(self, t, h, inputs):
-            t0 = time.perf_counter()
-            try:
-                return super().exchange(t, h, inputs)
-            finally:
-                type(self).exchange_seconds += time.perf_counter() - t0
-    return Timed
-
-
-def measure(config: RunConfig, endpoint_cls, name: str) -> tuple[float, float, int]:
-    timed = timed_exchange(endpoint_cls)
-    setattr(run_module, name, timed)
-    try:
-        t0 = time.perf_counter()
-        result = run(config)
-        wall = time.perf_counter() - t0
-    finally:
-        setattr(run_module, name, endpoint_cls)
+def loop_us(config: RunConfig) -> float:
+    """µs per communication step of one run (setup included; it is small against 10,000 steps)."""
+    t0 = time.perf_counter()
+    result = run(config)
+    wall = time.perf_counter() - t0
     assert result.ok, result.message
-    return wall, timed.exchange_seconds, result.meta["component_calls"]
+    return wall * 1e6 / round(config.revs * config.crank_period / config.step)
+
+
+def headline_s(extra_env: dict | None = None) -> float:
+    """Wall time [s] of ``python -m mechanism run`` (2 revolutions, CSV, ideal counterpart, plots)."""
+    env = dict(os.environ, **(extra_env or {}))
+    with tempfile.TemporaryDirectory() as out:
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "mechanism", "run", "--quiet", "--out", out], check=True, env=env,
+                       stdout=subprocess.DEVNULL)
+        return time.perf_counter() - t0
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__)
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--revs", type=float, default=2.0)
     p.add_argument("--rpm", type=float, default=1200.0)
     p.add_argument("--step", type=float, default=1e-5)
+    p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--cold", action="store_true", help="also time a first run in a fresh numba cache")
     a = p.parse_args()
-    base = RunConfig(rpm=a.rpm, revs=a.revs, step=a.step, progress=False)
-    run_module.fmu_path(base)  # build the FMU before timing
-    print(f"{a.revs:g} revolutions at {a.rpm:g} rpm, step {a.step:g} s, scheme {base.scheme}")
-    cos_wall, cos_ex, calls = measure(base, FmuEndpoint, "FmuEndpoint")
-    inp_wall, inp_ex, _ = measure(RunConfig(**{**base.__dict__, "mode": "inprocess"}), InProcessEndpoint,
-                                  "InProcessEndpoint")
-    t0 = time.perf_counter()
-    mono = run(RunConfig(**{**base.__dict__, "mode": "monolithic"}))
-    mono_wall = time.perf_counter() - t0
-    print(f"cosim (FMU via fmpy)        {cos_wall:7.2f} s   ({calls} communication steps)")
-    print(f"in-process (same master)    {inp_wall:7.2f} s")
-    print(f"ratio cosim / in-process    {cos_wall / inp_wall:7.2f}")
-    print(f"master alone per step       {1e6 * (inp_wall - inp_ex) / calls:7.1f} µs")
-    print(f"FMU exchange per step       {1e6 * cos_ex / calls:7.1f} µs (set 6 inputs, doStep, get 8 outputs)")
-    print(f"in-process law per step     {1e6 * inp_ex / calls:7.1f} µs")
-    print(f"monolithic reference        {mono_wall:7.2f} s   ({mono.meta['method']}, rtol {mono.meta['rtol']:g}, "
-          f"{mono.meta['rhs_calls']} right-hand sides)")
+    base = RunConfig(rpm=a.rpm, revs=a.revs, step=a.step, output_interval=a.step, progress=False)
+    fmu = run_module.fmu_path(base)   # build the FMU before timing
+    configs = {"cosim": base, "inprocess": RunConfig(**{**base.__dict__, "mode": "inprocess"}),
+               "ideal": RunConfig(**{**base.__dict__, "joint": "ideal"})}
+    for config in configs.values():   # warm up (imports, compiled kernels)
+        run(RunConfig(**{**config.__dict__, "revs": 0.01}))
+    samples: dict[str, list[float]] = {"bare": [], **{k: [] for k in configs}}
+    for _ in range(a.repeat):
+        samples["bare"].append(bare_exchange_us(fmu))
+        for name, config in configs.items():
+            samples[name].append(loop_us(config))
+    med = {k: statistics.median(v) for k, v in samples.items()}
+    steps = round(a.revs * base.crank_period / a.step)
+    print(f"{a.revs:g} revolutions at {a.rpm:g} rpm, step {a.step:g} s ({steps} communication steps), "
+          f"scheme {base.scheme}, medians of {a.repeat}")
+    print(f"bare fmpy exchange (set 6, doStep, get 8)  {med['bare']:8.1f} µs/call")
+    print(f"co-simulation loop (FMU)                   {med['cosim']:8.1f} µs/step   "
+          f"{med['cosim'] / med['bare']:6.2f} x the bare exchange (target <= 3)")
+    print(f"in-process loop (force law in-process)     {med['inprocess']:8.1f} µs/step   "
+          f"{med['inprocess'] / med['bare']:6.2f} x the bare exchange (target <= 15 µs)")
+    print(f"ideal-joint loop (no bearing)              {med['ideal']:8.1f} µs/step   "
+          f"{med['ideal'] / med['bare']:6.2f} x the bare exchange")
+    print(f"headline `python -m mechanism run` (warm)  {headline_s():8.2f} s (target <= 3 s)")
+    if a.cold:
+        with tempfile.TemporaryDirectory() as cache:
+            print(f"first run, fresh numba cache (compiling)   {headline_s({'NUMBA_CACHE_DIR': cache}):8.2f} s "
+                  f"(target <= 15 s)")
 
 
 if __name__ == "__main__":

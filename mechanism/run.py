@@ -72,12 +72,18 @@ class RunConfig:
     method: str = "LSODA"
     rtol: float = 1e-9
     progress: bool = True
+    record_every: int | None = None      # record every N-th communication step (overrides output_interval)
 
     def __post_init__(self):
         if self.joint not in JOINTS:
             raise ValueError(f"joint must be one of {JOINTS}, not {self.joint!r}")
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, not {self.mode!r}")
+        if self.record_every is not None:
+            if isinstance(self.record_every, bool) or int(self.record_every) != self.record_every \
+                    or self.record_every < 1:
+                raise ValueError(f"record_every must be a positive integer, not {self.record_every!r}")
+            self.output_interval = self.record_every * self.step
         for name, (lo, hi, unit) in RANGES.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, numbers.Real) or not lo <= value <= hi:

@@ -281,16 +281,17 @@ def test_other_tools_runs_are_checked_for_divergence_and_refused_steps():
     assert k == 8 and "eccentricity limit" in cause
 
 
-def test_stepsize_study_exits_non_zero_when_no_case_could_run(capsys):
+def test_stepsize_study_exits_non_zero_when_every_case_failed(capsys):
+    """Errors, refusals and unstable runs are failed cases; one stable case makes the sweep a result."""
     from mechanism.studies.stepsize.cases import ERROR, FAILED, SKIPPED, STABLE
     from mechanism.studies.stepsize.cli import exit_status
     broken = [{"status": ERROR, "message": "ValueError: rpm = -5 is outside its range", "steps": None},
               {"status": FAILED, "message": "stopped at step 0: n_balls", "steps": None},
               {"status": SKIPPED, "message": "cost", "steps": None}]
     assert exit_status(broken) == 1
-    assert "none of the 2 cases could run" in capsys.readouterr().err
+    assert "every case failed (2 cases)" in capsys.readouterr().err
     assert exit_status(broken + [{"status": STABLE, "message": "", "steps": 100}]) == 0
-    assert exit_status(broken + [{"status": FAILED, "message": "unstable", "steps": 40}]) == 0
+    assert exit_status(broken + [{"status": FAILED, "message": "unstable", "steps": 40}]) == 1
 
 
 # ------------------------------------------------------------------------------------------- memory

@@ -19,6 +19,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import stat
 import subprocess
 import sys
 import tempfile
@@ -133,7 +134,11 @@ def build_loader(fmu: str | Path, platforms: tuple[str, ...] = tuple(TARGETS)) -
         tmp_fmu = fmu.with_name(f".{fmu.name}.{os.getpid()}.loader")
         with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
             for name, (info, data) in entries.items():
-                z.writestr(zipfile.ZipInfo(name, info.date_time), data, zipfile.ZIP_DEFLATED)
+                entry = zipfile.ZipInfo(name, info.date_time)
+                # regular files readable by all (rw-r--r--), libraries rwxr-xr-x
+                mode = 0o755 if name.startswith("binaries/") else 0o644
+                entry.external_attr = (stat.S_IFREG | mode) << 16
+                z.writestr(entry, data, zipfile.ZIP_DEFLATED)
         os.replace(tmp_fmu, fmu)
     return built
 

@@ -199,6 +199,9 @@ static Instance *live[MAX_LIVE];
 
 static int loaded = 0;           /* 1: pythonfmu's binary and Python are loaded */
 static char load_error[4096];    /* why loading failed (reported by every fmi2Instantiate) */
+#if defined(__linux__)
+__attribute__((tls_model("initial-exec")))  /* no __tls_get_addr call on every FMI call */
+#endif
 static THREAD_LOCAL int thread_attached;  /* 1: this thread has its persistent Python thread state */
 
 #ifndef _WIN32

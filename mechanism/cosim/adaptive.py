@@ -131,7 +131,7 @@ def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Adap
     history: list | None = [] if settings.keep_history else None
     try:
         loop.start(y)
-        rec.add(loop.row(0.0, y))
+        loop.record(rec, 0.0, y)
         while tick < n_out * ticks_out:
             t = tick * dt_out / ticks_out
             snap = loop.snapshot()
@@ -186,7 +186,7 @@ def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Adap
             e_amp = max(e_amp, math.hypot(u_small[0], u_small[1]))
             v_amp = max(v_amp, math.hypot(u_small[2], u_small[3]))
             if tick % ticks_out == 0:
-                rec.add(loop.row(tick * dt_out / ticks_out, y))
+                loop.record(rec, tick * dt_out / ticks_out, y)
                 bar.update(1)
             # grow only after `patience` steps whose error would stay under tol at twice the step
             good = good + 1 if err * 8.0 <= settings.safety else 0

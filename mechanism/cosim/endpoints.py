@@ -21,12 +21,15 @@ from __future__ import annotations
 
 import atexit
 import ctypes
+import math
 import os
 import shutil
 import tempfile
 import threading
 from pathlib import Path
 from typing import Mapping, Sequence
+
+import numpy as np
 
 from fmu_bearing import life
 from fmu_bearing.ball_bearing import BallBearing, BearingInputError
@@ -48,7 +51,7 @@ class InProcessEndpoint:
     kind = "in-process"
 
     def __init__(self, parameters: BearingParameters | Mapping[str, float] | None = None,
-                 capacity: int | None = None):
+                 capacity: int | None = None, compiled: bool = True):
         if parameters is None or isinstance(parameters, BearingParameters):
             params = parameters or BearingParameters()
         else:
@@ -64,6 +67,11 @@ class InProcessEndpoint:
         self._inputs = (0.0,) * 6
         self._cage = float(params.cage_angle_start)
         self._out: tuple = ()
+        self._law = None
+        if compiled:
+            from mechanism.cosim import law_kernel
+            self._law, self._law_evaluate = law_kernel.pack_bearing(self.bearing), law_kernel.evaluate
+            self._law_out, self._law_loads = np.zeros(10), np.zeros(self.n_balls)
 
     def initialize(self, inputs: Sequence[float]) -> tuple[float, ...]:
         """Set the start inputs and return the coupling outputs at the start time."""
@@ -74,10 +82,11 @@ class InProcessEndpoint:
     def exchange(self, t: float, h: float, inputs: Sequence[float]) -> tuple[float, ...]:
         """Set inputs, advance over [t, t + h] with them held, return the end-of-step coupling outputs."""
         ex, ey, vx, vy, wi, wo = inputs
-        try:
-            self.bearing.check_inputs(ex, ey, vx, vy, wi, wo)
-        except BearingInputError as err:
-            raise ExchangeError(str(err)) from None
+        if not (math.isfinite(ex + ey + vx + vy + wi + wo) and math.hypot(ex, ey) <= self.bearing.eccentricity_limit):
+            try:
+                self.bearing.check_inputs(ex, ey, vx, vy, wi, wo)
+            except BearingInputError as err:
+                raise ExchangeError(str(err)) from None
         self.calls += 1
         self._inputs = (ex, ey, vx, vy, wi, wo)
         self._cage = self.bearing.advance_cage(self._cage, wi, wo, h)
@@ -87,10 +96,17 @@ class InProcessEndpoint:
 
     def _evaluate(self) -> None:
         ex, ey, vx, vy, wi, wo = self._inputs
-        self._out = self.bearing.evaluate(ex, ey, vx, vy, self._cage, wi, wo, self._loads)
+        if self._law is None:
+            self._out = self.bearing.evaluate(ex, ey, vx, vy, self._cage, wi, wo, self._loads)
+        else:   # the compiled second implementation (mechanism.cosim.law_kernel, tested against evaluate)
+            self._law_evaluate(self._law, ex, ey, vx, vy, self._cage, wi, wo, self._law_out, self._law_loads)
+            self._out = tuple(self._law_out.tolist())
+            self._loads[:] = self._law_loads.tolist()
 
     def sample(self) -> list[float]:
         out = self._out
+        if self._law is not None:
+            return [self._cage, out[8], out[9], *self._loads]
         return [self._cage, float(out.loaded_balls), out.max_ball_load, *self._loads]
 
     def life_outputs(self) -> dict[str, float]:

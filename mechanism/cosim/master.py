@@ -77,6 +77,7 @@ class MasterSettings:
     description: str = "co-simulation"
     max_iterations: int = 8              # iterated schemes: passes per step at most (then accepted, counted)
     iteration_tol: float = 1e-7          # iterated schemes: end force / eccentricity agreement (relative)
+    kernels: bool = True                 # compiled step (mechanism.multibody.kernels); False: the NumPy reference
 
 
 #: observe(q, qd, qdd, lam, t) -> named observables of the mechanism (slider_x, crank_moment, ...)
@@ -143,71 +144,183 @@ class CouplingLoop:
             qdd = system.accelerations(q, qd, tau, Q)[0]
             return np.concatenate((qd, qdd))
         self.rhs = rhs
+        self.kernels = settings.kernels
+        if self.kernels:
+            self._setup_kernels(observe)
+
+    # ------------------------------------------------------------------ compiled path
+    def _setup_kernels(self, observe: Observer) -> None:
+        """Pack the model for the kernels; preallocate the end-of-step evaluation and the row probes."""
+        from mechanism.multibody import kernels as kn
+        self._kn = kn
+        system, link = self.system, self.link
+        self._I, self._R = kn.pack(system)
+        self._L, self._LR = kn.pack_link(system, link.joint if link is not None else None,
+                                         link.contact_points if link is not None else "centres")
+        self._W = np.zeros(kn.workspace_size(self._I))
+        self._u = np.zeros(6)
+        self._zero_fm = np.zeros(17)
+        self._dy = np.zeros(2 * self.n)       # dy/dt at the end state (the sample, the next step's first stage)
+        self._lam = np.zeros(system.m)
+        self._end = (None, None)              # (y, t) that _dy, _lam and W's kinematics belong to
+        self._cv = 0.0
+        index = {c: i for i, c in enumerate(self.columns)}
+        probes = [("time", 6, 0, 1.0), ("constraint_violation", 7, 0, 1.0), ("kinetic_energy", 8, 0, 1.0)]
+        if self.link is not None:
+            probes += [(c, 4, i, 1.0) for i, c in enumerate(("e_x", "e_y", "v_x", "v_y", "omega_inner",
+                                                               "omega_outer"))]
+        else:
+            probes += [(c, 6, 0, 0.0) for c in ("e_x", "e_y", "v_x", "v_y")]
+        probes += [("F_x", 5, 0, 1.0), ("F_y", 5, 1, 1.0)]
+        source = {"q": 0, "qd": 1, "qdd": 2, "lam": 3}
+        self._observe_in_kernel = hasattr(observe, "probes")
+        if self._observe_in_kernel:
+            probes += [(c, source[src], i, k) for c, src, i, k in observe.probes]
+        self._probes = np.array([(index[p[0]], p[1], p[2]) for p in probes], np.int64).reshape(-1, 3)
+        self._probe_scale = np.array([p[3] for p in probes], np.float64)
+        self._sample_cols = np.array([index[c] for c in self.sample_names], np.int64)
+        if len(self._sample_cols) and np.array_equal(np.diff(self._sample_cols), np.ones(len(self._sample_cols) - 1)):
+            self._sample_cols = slice(int(self._sample_cols[0]), int(self._sample_cols[-1]) + 1)   # a faster write
+        self._no_row = np.zeros(0)
+        probe = getattr(self.reaction_force, "probe", None)   # (joint rows start, stop, x column, y column)
+        self._react = np.array(probe if probe is not None and self.link is None else (), np.int64)
+
+    def _finish_state(self, y: np.ndarray, t: float, rec: Recorder | None = None) -> None:
+        """dy/dt and lambda at the end state y (its kinematics in W) with the exchanged force; with
+        ``rec`` also the sample (one evaluation for both; see ``record``)."""
+        if self.link is not None:
+            fx, fy = self.force
+            ex, ey = self.inputs[0], self.inputs[1]
+        else:
+            fx = fy = ex = ey = 0.0
+        row = self._no_row if rec is None else rec.next_row()
+        self._kn.finish(y, ex, ey, fx, fy, self._I, self._R, self._L, self._LR, self._W, self._u, self._dy,
+                        self._lam, row, self._probes, self._probe_scale, t, self._cv, self._react)
+        self._end = (y, t)
+        if rec is None:
+            return
+        n = self.n
+        if self.link is None:
+            if not len(self._react):
+                row[rec.index["F_x"]], row[rec.index["F_y"]] = self.reaction_force(y[:n], self._lam)
+        elif self.sample_names:
+            row[self._sample_cols] = self.endpoint.sample()
+        if not self._observe_in_kernel:
+            for name, value in self.observe(y[:n], y[n:], self._dy[n:], self._lam, t).items():
+                row[rec.index[name]] = value
+        if self.energy is not None and self.link is not None:
+            for name, value in self.energy.update(t, y[:n], y[n:], self._lam).items():
+                row[rec.index[name]] = value
+
+    def _k1_valid(self, y: np.ndarray, t0: float, fm: np.ndarray) -> bool:
+        """True if the stored end-of-step evaluation is this step's first RK4 stage (same state, time
+        and force: F(t_ref = t0, e0, v0) of the force model is the exchanged force at the inputs)."""
+        end_y, end_t = self._end
+        if end_y is not y or end_t != t0:
+            return False
+        if self.link is None:
+            return True
+        u, f = self.inputs, self.force
+        if fm[0] != t0 or fm[1] != f[0] or fm[2] != f[1]:
+            return False
+        if fm[7] == u[0] and fm[8] == u[1] and fm[9] == u[2] and fm[10] == u[3]:
+            return True
+        return not fm[11:].any()
 
     def start(self, y: np.ndarray) -> None:
         """Initialise the component with the inputs of state y at t = 0 (no-op without a component)."""
+        if self.kernels:
+            self._kn.prepare(y, 0.0, self._I, self._R, self._L, self._LR, self._W, self._u)
+            self._cv = self._kn.max_violation(self._I, self._W) if self.system.m else 0.0
+            self._end = (None, None)
         if self.endpoint is None:
             return
         n, link = self.n, self.link
-        u = link.inputs(y[:n], y[n:])
+        u = tuple(self._u.tolist()) if self.kernels else link.inputs(y[:n], y[n:])
         out = self.endpoint.initialize(u)
         self.inputs, self.force = u, out[:2]
         self.scheme.push(Exchanged(0.0, *u[:4], *out))
         if self.scheme.uses_tangent:
             self.mobility = link.mobility(y[:n], 0.0)
 
-    def advance(self, y: np.ndarray, t0: float, h: float, step: int, t: float | None = None) -> np.ndarray:
+    def advance(self, y: np.ndarray, t0: float, h: float, step: int, t: float | None = None,
+                rec: Recorder | None = None) -> np.ndarray:
         """One communication step [t0, t0 + h] from state y; returns the state at its end.
 
-        ``t`` is the end time (default t0 + h; the fixed-step loop passes step * h).
+        ``t`` is the end time (default t0 + h; the fixed-step loop passes step * h). With ``rec`` the
+        sample at the end of the step is appended to it (as ``record`` would, sharing its evaluation).
         Raises ``RunFailure`` (``step`` names it) or the component's error.
         """
         if t is None:
             t = t0 + h
         y_start = y
         settings, scheme, endpoint, system = self.settings, self.scheme, self.endpoint, self.system
+        fm = None
         if endpoint is not None:
             pending = endpoint.exchange(t0, h, self.inputs) if scheme.ordering == "jacobi" else None
             scheme.begin_step(t0, h)
             m = substeps(h, scheme.past[-1], self.mobility, settings.substep_limit,
                          settings.max_substeps) if scheme.uses_tangent else 1
+            if self.kernels:
+                model = scheme.force_model(t0, h)
+                fm = model.coefficients if model is not None else None
         else:
             m = 1
-        self.substeps_max = max(self.substeps_max, m)
+            fm = self._zero_fm if self.kernels else None
+        if m > self.substeps_max:
+            self.substeps_max = m
         self.substeps_total += m
         hs = h / m
-        rhs = self.rhs
-        for k in range(m):
-            y = rk4_step(rhs, t0 + k * hs, y, hs)
-        if not np.all(np.isfinite(y)):
+        if fm is not None:     # the compiled step (kinematics of the end state included)
+            if self._end[0] is not y:
+                self._end = (None, None)
+            y, drift, finite = self._kn.advance(y, t0, hs, m, t, fm, self._dy, self._k1_valid(y, t0, fm), self._I,
+                                                self._R, self._L, self._LR, self._W, self._u)
+        else:                  # the NumPy reference (or a scheme without a force model)
+            rhs = self.rhs
+            for k in range(m):
+                y = rk4_step(rhs, t0 + k * hs, y, hs)
+            finite = bool(np.all(np.isfinite(y)))
+            drift = None
+            if self.kernels:   # the compiled end-of-step evaluation follows
+                self._kn.prepare(y, t, self._I, self._R, self._L, self._LR, self._W, self._u)
+                drift = self._kn.max_violation(self._I, self._W)
+        if not finite:
             raise RunFailure(step, t, "the mechanism state is not finite (the integration diverged)")
         n = self.n
-        q, qd = y[:n], y[n:]
         if system.m:
-            drift = float(np.max(np.abs(system.phi(q, t))))
+            if drift is None:
+                drift = float(np.max(np.abs(system.phi(y[:n], t))))
+            self._cv = drift
             if drift > settings.max_constraint_violation:
                 raise RunFailure(step, t, f"constraint violation {drift:.3g} exceeds "
                                           f"{settings.max_constraint_violation:g} (the integration diverged)")
         if endpoint is not None:
-            u = self.link.inputs(q, qd)
+            u = tuple(self._u.tolist()) if self.kernels else self.link.inputs(y[:n], y[n:])
             if scheme.ordering == "jacobi":
                 out, used = pending, self.inputs
             else:
-                sent = u if scheme.ring_speeds == "end" else self.link.secant_ring_speeds(u, y_start[:n], q, h)
+                sent = u if scheme.ring_speeds == "end" else self.link.secant_ring_speeds(u, y_start[:n], y[:n], h)
                 out, used = endpoint.exchange(t0, h, sent), u
-            if not all(math.isfinite(x) for x in out):
+            if not math.isfinite(sum(out)):
                 raise RunFailure(step, t, f"the bearing returned a non-finite force {out[:2]}")
             scheme.push(Exchanged(t, *used[:4], *out))
             self.inputs, self.force = u, out[:2]
+        if self.kernels:
+            self._finish_state(y, t, rec)
+        elif rec is not None:
+            rec.add(self.row(t, y))
         return y
 
-    def communicate(self, y: np.ndarray, t0: float, h: float, step: int, t: float | None = None) -> np.ndarray:
+    def communicate(self, y: np.ndarray, t0: float, h: float, step: int, t: float | None = None,
+                    rec: Recorder | None = None) -> np.ndarray:
         """One communication step: ``advance``, or for an iterative scheme (strong coupling) ``advance``
         repeated with rollback (FMU get/set state) until two passes' end-of-step force and eccentricity
-        agree to ``settings.iteration_tol`` or ``settings.max_iterations`` passes were made."""
+        agree to ``settings.iteration_tol`` or ``settings.max_iterations`` passes were made. With ``rec`` the
+        sample at the end of the step is appended (as ``advance`` does)."""
         scheme = self.scheme
         if scheme is None or not scheme.iterative:
-            return self.advance(y, t0, h, step, t)
+            return self.advance(y, t0, h, step, t, rec)
         stats, limit = self.iterations, max(2, self.settings.max_iterations)
         energy, n = self.energy, self.n
         start = scheme.past[-1]
@@ -235,10 +348,21 @@ class CouplingLoop:
         stats["steps"] += 1
         stats["passes"] += passes
         stats["max_passes"] = max(stats["max_passes"], passes)
+        if rec is not None:                          # the sample of the accepted (last) pass
+            self.record(rec, t if t is not None else t0 + h, y_end)
         return y_end
+    def record(self, rec: Recorder, t: float, y: np.ndarray) -> None:
+        """Append the sample at time t of the state y (the last one ``start``/``advance`` reached) to ``rec``."""
+        if not self.kernels:
+            rec.add(self.row(t, y))
+            return
+        if self._end[0] is not y or self._end[1] != t:
+            self._kn.prepare(y, t, self._I, self._R, self._L, self._LR, self._W, self._u)
+        self._finish_state(y, t, rec)
 
     def row(self, t: float, y: np.ndarray) -> dict:
-        """The sample at time t for the end-of-step state y: observables, inputs, force, component samples."""
+        """The sample at time t for the end-of-step state y: observables, inputs, force, component samples
+        (the NumPy reference of ``record``)."""
         system, link, n = self.system, self.link, self.n
         q, qd = y[:n], y[n:]
         force = self.force
@@ -277,6 +401,8 @@ class CouplingLoop:
             self.scheme.past.extend(past)
         if self.endpoint is not None:
             self.endpoint.set_state(fmu_state)
+        if self.kernels:
+            self._end = (None, None)
 
     def release(self, snap) -> None:
         if self.endpoint is not None and snap[3] is not None:
@@ -309,13 +435,11 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
                mininterval=0.5, leave=False)
     try:
         loop.start(y)
-        rec.add(loop.row(0.0, y))
+        loop.record(rec, 0.0, y)
         for step in range(1, n_steps + 1):
             t0 = (step - 1) * h
             t = step * h
-            y = loop.communicate(y, t0, h, step, t)
-            if step % every == 0:
-                rec.add(loop.row(t, y))
+            y = loop.communicate(y, t0, h, step, t, rec if step % every == 0 else None)
             if step % 500 == 0:
                 bar.update(500)
     except RunFailure as err:
@@ -342,4 +466,4 @@ def finish(rec: Recorder, info: dict, status: str, message: str, endpoint, bar, 
         info["component_calls"] = endpoint.calls
         if hasattr(endpoint, "life_outputs"):  # bearing rating life at the end (docs/bearing-life.md)
             info["life_outputs"] = endpoint.life_outputs()
-    return RunResult(rec.columns, rec.table().copy(), info, status, message)
+    return RunResult(rec.columns, rec.table(), info, status, message)

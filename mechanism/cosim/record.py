@@ -39,16 +39,24 @@ class Recorder:
         self.data = np.full((max(capacity, 1), len(self.columns)), np.nan)
         self.rows = 0
 
-    def add(self, values: dict[str, float]) -> None:
+    def next_row(self) -> np.ndarray:
+        """The next row (a view, NaN-filled) to write a sample into; the table doubles when full."""
         if self.rows == len(self.data):
             self.data = np.vstack([self.data, np.full_like(self.data, np.nan)])
-        row = self.data[self.rows]
+        self.rows += 1
+        return self.data[self.rows - 1]
+
+    def add(self, values: dict[str, float]) -> None:
+        row = self.next_row()
         for name, value in values.items():
             row[self.index[name]] = value
-        self.rows += 1
 
     def table(self) -> np.ndarray:
-        return self.data[: self.rows]
+        """The recorded rows (a view while the capacity is used up to one spare row, else a copy, so that
+        a table preallocated for a run that stopped early does not stay in memory)."""
+        if self.rows + 1 >= len(self.data):
+            return self.data[: self.rows]
+        return self.data[: self.rows].copy()
 
 
 @dataclass
@@ -88,3 +96,17 @@ def energy_summary(r: RunResult) -> dict | None:
             "cage_work_J": float(r["cage_work"][-1]), "applied_work_J": float(r["applied_work"][-1]),
             "energy_residual_J": float(residual[-1]), "energy_residual_max_abs_J": abs(worst),
             "energy_residual_rel_dissipation": float(residual[-1]) / dissipated if dissipated > 0 else None}
+
+
+def resample(result: RunResult, times: np.ndarray) -> RunResult:
+    """``result`` at other sample times, by a cubic spline through each column (times within its range;
+    ``meta["resampled_from_s"]`` keeps the original sampling interval)."""
+    from scipy.interpolate import CubicSpline
+    t = result["time"]
+    times = np.asarray(times, float)
+    times = times[times <= t[-1] * (1 + 1e-12)]
+    data = np.column_stack([times] + [CubicSpline(t, result.data[:, k])(times) if np.all(np.isfinite(result.data[:, k]))
+                                      else np.interp(times, t, result.data[:, k])
+                                      for k in range(1, len(result.columns))])
+    meta = dict(result.meta, resampled_from_s=float(t[1] - t[0]) if len(t) > 1 else 0.0)
+    return RunResult(result.columns, data, meta, result.status, result.message)

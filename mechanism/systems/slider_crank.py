@@ -117,6 +117,10 @@ def slider_crank_observer(system: System):
         return {"crank_angle": float(q[crank.start + 2]), "slider_x": float(q[slider.start]),
                 "slider_v": float(qd[slider.start]), "slider_a": float(qdd[slider.start]),
                 "crank_moment": system.driving_moment(lam, "crank_driver")}
+    # the same observables as linear picks (column, source, index, scale) for the compiled recorder
+    observe.probes = (("crank_angle", "q", crank.start + 2, 1.0), ("slider_x", "q", slider.start, 1.0),
+                      ("slider_v", "qd", slider.start, 1.0), ("slider_a", "qdd", slider.start, 1.0),
+                      ("crank_moment", "lam", system.rows("crank_driver").start, -1.0))
     return observe
 
 
@@ -127,4 +131,6 @@ def ideal_reaction(system: System):
     def reaction(q, lam):
         Qc = system.reactions(q, lam)["crank_rod"]
         return float(Qc[crank.start]), float(Qc[crank.start + 1])
+    rows = system.rows("crank_rod")
+    reaction.probe = (rows.start, rows.stop, crank.start, crank.start + 1)   # the same, for the compiled recorder
     return reaction
