@@ -24,7 +24,7 @@ from fmu_bearing.ball_bearing import BallBearing
 from fmu_bearing.clearance_joint import ClearanceJoint
 
 ROOT = Path(__file__).resolve().parent.parent
-DISCARD, FATAL = 2, 4
+DISCARD = 2
 E_X = 3e-5                       # 20 um into the Table 2 bearing (P_d/2 = 10 um); 12 um into the bushing
 
 
@@ -236,6 +236,128 @@ def test_do_step_after_terminate_is_refused(fmus, tmp_path, name):
     assert err.value.status == DISCARD
     assert [(c, "fmi2Terminate" in m) for s, c, m in host.messages] == [("logStatusError", True)]
     host.s.freeInstance()
+
+
+# --- the loader's logging filter and status mapping (fmu_bearing/native/loader.c; issues 13.5, 14.7) --------
+# These hosts use fmpy's logger proxy (mechanism.cosim.fmpy_logging), behind which the slaves do not call the
+# host's logger themselves (HostLogger): every message reaches the host through pythonfmu and the loader.
+
+ERROR = 3
+
+
+def _fmpy_host(path: Path, unzip: Path, logging_on: bool):
+    from mechanism.cosim.fmpy_logging import fmpy_callbacks
+    extract(str(path), unzipdir=str(unzip))
+    md = read_model_description(str(unzip))
+    messages = []
+    callbacks = fmpy_callbacks(lambda env, inst, status, cat, msg: messages.append(
+        (status, cat and cat.decode(), msg.decode("utf-8", "replace"))))
+    s = FMU2Slave(guid=md.guid, unzipDirectory=str(unzip), modelIdentifier=md.coSimulation.modelIdentifier,
+                  instanceName="filtered")
+    s.instantiate(callbacks=callbacks, loggingOn=logging_on)
+    return s, {v.name: v.valueReference for v in md.modelVariables}, messages, callbacks
+
+
+def _free(s, callbacks):
+    from mechanism.cosim.fmpy_logging import release
+    s.freeInstance()
+    release(callbacks)
+
+
+def test_import_failure_of_a_damaged_fmu_reaches_the_host_with_logging_off(ball_bearing_fmu, tmp_path):
+    """A module missing when pythonfmu imports the slave module (before any slave code runs): only pythonfmu can
+    report it, and only to a logging instance; the loader keeps pythonfmu's logging on and passes errors on.
+    In a subprocess: the half-imported private package would stay in this process's sys.modules."""
+    script = textwrap.dedent(f"""
+        import glob, json, os
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+        from mechanism.cosim.fmpy_logging import fmpy_callbacks
+        unzip = extract({str(ball_bearing_fmu)!r}, unzipdir={str(tmp_path / "x")!r})
+        os.remove(glob.glob(os.path.join(unzip, "resources", "_fmu_bearing_*", "life.py"))[0])   # damaged
+        md = read_model_description(unzip)
+        messages = []
+        callbacks = fmpy_callbacks(lambda env, inst, status, cat, msg: messages.append(
+            (status, cat and cat.decode(), msg.decode())))
+        s = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier="BallBearing", instanceName="damaged")
+        try:
+            s.instantiate(callbacks=callbacks, loggingOn=False)
+            failed = False
+        except Exception as err:
+            failed = "Failed to instantiate" in str(err)
+        print(json.dumps({{"failed": failed, "messages": messages}}))
+    """)
+    proc = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    report = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert report["failed"]
+    [(status, category, message)] = report["messages"]          # the cause, once
+    assert status >= ERROR and category == {3: "logStatusError", 4: "logStatusFatal"}[status]
+    assert "ImportError" in message and "'life'" in message, message
+
+
+@pytest.mark.parametrize("logging_on", [False, True])
+def test_bad_parameter_fails_exit_initialization_with_error_not_fatal(ball_bearing_fmu, tmp_path, logging_on):
+    """n_balls = 2: fmi2Error (the call failed, the instance is intact: FMI 2.0), not pythonfmu's fmi2Fatal;
+    the message names the parameter, comes once, with the status the call returns; fmi2Reset recovers."""
+    s, vr, messages, callbacks = _fmpy_host(ball_bearing_fmu, tmp_path / "x", logging_on)
+    try:
+        s.setupExperiment(startTime=0.0)
+        s.enterInitializationMode()
+        s.setInteger([vr["n_balls"]], [2])
+        with pytest.raises(FMICallException) as err:
+            s.exitInitializationMode()
+        assert err.value.status == ERROR
+        assert len(messages) == 1, messages
+        status, category, message = messages[0]
+        assert (status, category) == (ERROR, "logStatusError") and "n_balls = 2" in message, messages
+        s.reset()                                               # recovered: a valid initialisation and a step
+        s.setupExperiment(startTime=0.0)
+        s.enterInitializationMode()
+        s.setReal([vr["e_x"]], [E_X])
+        s.exitInitializationMode()
+        s.doStep(0.0, 1e-4)
+        assert s.getReal([vr["F_x"]])[0] == pytest.approx(expected_forces()["BallBearing"][0], rel=1e-9)
+    finally:
+        _free(s, callbacks)
+
+
+def test_non_error_messages_follow_the_hosts_logging_and_categories(ball_bearing_fmu, tmp_path, monkeypatch):
+    """pythonfmu logs for the loader whatever the host said; the loader passes errors always, other messages
+    only while the host has logging on (fmi2Instantiate, fmi2SetDebugLogging) and in its categories."""
+    s, vr, messages, callbacks = _fmpy_host(ball_bearing_fmu, tmp_path / "x", logging_on=False)
+    try:
+        module = next(m for n, m in sys.modules.items() if n.startswith("ball_bearing_fmu_"))
+        status = module.Fmi2Status
+        original = module.BallBearing.do_step
+
+        def do_step(self, t, h):   # the slaves log only errors: a probe that logs one of each
+            self.log("probe ok", status.ok)
+            self.log("probe warning", status.warning)
+            self.log("probe error", status.error)
+            return original(self, t, h)
+
+        monkeypatch.setattr(module.BallBearing, "do_step", do_step)
+        s.setupExperiment(startTime=0.0)
+        s.enterInitializationMode()
+        s.setReal([vr["e_x"]], [E_X])
+        s.exitInitializationMode()
+
+        def step(t):
+            messages.clear()
+            s.doStep(t, 1e-4)
+            return sorted(m for _, _, m in messages)
+
+        assert step(0.0) == ["probe error"]                                   # logging off: errors only
+        s.setDebugLogging(True, [])
+        assert step(1e-4) == ["probe error", "probe ok", "probe warning"]     # on, all categories
+        s.setDebugLogging(True, ["logStatusWarning"])
+        assert step(2e-4) == ["probe error", "probe warning"]                 # on, one category
+        s.setDebugLogging(False, [])
+        assert step(3e-4) == ["probe error"]                                  # off again
+    finally:
+        _free(s, callbacks)
 
 
 # --- model description ---------------------------------------------------------------------------------

@@ -107,13 +107,10 @@ typedef struct {
 
 /* ---- the FMI functions of pythonfmu's binary ------------------------------------------------------ */
 #define FMI2_FUNCTIONS(X)                                                                                   \
-    X(fmi2Status, SetDebugLogging, (fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cat[]),      \
-      (c, on, n, cat))                                                                                      \
     X(fmi2Status, SetupExperiment,                                                                          \
       (fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real t0, fmi2Boolean stopDef, fmi2Real t1),   \
       (c, tolDef, tol, t0, stopDef, t1))                                                                    \
     X(fmi2Status, EnterInitializationMode, (fmi2Component c), (c))                                          \
-    X(fmi2Status, ExitInitializationMode, (fmi2Component c), (c))                                           \
     X(fmi2Status, Terminate, (fmi2Component c), (c))                                                        \
     X(fmi2Status, Reset, (fmi2Component c), (c))                                                            \
     X(fmi2Status, GetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]),        \
@@ -157,6 +154,8 @@ typedef struct {
 typedef fmi2Component (*InstantiateFn)(fmi2String, fmi2Type, fmi2String, fmi2String,
                                        const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
 typedef void (*FreeInstanceFn)(fmi2Component);
+typedef fmi2Status (*SetDebugLoggingFn)(fmi2Component, fmi2Boolean, size_t, const fmi2String[]);
+typedef fmi2Status (*ExitInitializationModeFn)(fmi2Component);
 typedef fmi2Status (*GetDirectionalDerivativeFn)(fmi2Component, const fmi2ValueReference[], size_t,
                                                  const fmi2ValueReference[], size_t, const fmi2Real[], fmi2Real[]);
 
@@ -164,6 +163,8 @@ typedef fmi2Status (*GetDirectionalDerivativeFn)(fmi2Component, const fmi2ValueR
 static struct {
     InstantiateFn Instantiate;
     FreeInstanceFn FreeInstance;
+    SetDebugLoggingFn SetDebugLogging;
+    ExitInitializationModeFn ExitInitializationMode;
     GetDirectionalDerivativeFn GetDirectionalDerivative;
     void (*finalize)(void);
     FMI2_FUNCTIONS(DECLARE_POINTER)
@@ -181,6 +182,8 @@ static struct {
     wchar_t *(*DecodeLocale)(const char *, size_t *);
 } py;
 
+#define MAX_CATEGORIES 16
+
 /* ---- one instance: pythonfmu's component and the host's callbacks --------------------------------- */
 typedef struct {
     fmi2Component inner;                /* pythonfmu's component */
@@ -190,6 +193,11 @@ typedef struct {
     fmi2ComponentEnvironment host_env;
     const fmi2CallbackFunctions *host_functions;  /* the host's own struct (FMI: valid until fmi2FreeInstance) */
     char name[128];                     /* instance name, for the loader's own messages */
+    int host_logging;                   /* the host's loggingOn / fmi2SetDebugLogging (pythonfmu's is always on) */
+    int n_categories;                   /* the host's categories (0: all) */
+    char categories[MAX_CATEGORIES][64];
+    volatile int direct_error;          /* the slave sent an error to the host directly during this call */
+    int in_exit_initialization;         /* inside fmi2ExitInitializationMode: Fatal is reported as Error */
 } Instance;
 
 /* The live instances, so bearingLoaderHostCallbacks can tell one of ours from any other pointer without
@@ -254,6 +262,34 @@ static const char *status_category(fmi2Status status) {
     }
 }
 
+/* Whether a message pythonfmu hands the loader goes on to the host. pythonfmu 0.7 forwards messages only
+   with logging on, so the loader always instantiates it with loggingOn = fmi2True (else a failure before
+   the slave's code runs, e.g. a module missing from a damaged FMU, would never be reported) and filters
+   here by the host's wish: errors (fmi2Error, fmi2Fatal) always, other messages only with the host's
+   logging on and, if it named categories in fmi2SetDebugLogging, in one of them. pythonfmu's own report of
+   an exception (category NULL) is dropped with the host's logging off when the slave already sent the
+   error to the host directly during this call (fmu_bearing.slaves.HostLogger -> bearingLoaderDirectError):
+   the host then gets the cause once, as before with logging off. */
+static int pass_message(const Instance *inst, fmi2Status status, fmi2String category) {
+    if (status >= fmi2Error)
+        return inst->host_logging || !inst->direct_error || (category != NULL && category[0] != '\0');
+    if (!inst->host_logging) return 0;
+    if (inst->n_categories == 0) return 1;
+    const char *cat = (category == NULL || category[0] == '\0') ? status_category(status) : category;
+    for (int i = 0; i < inst->n_categories; i++)
+        if (strcmp(inst->categories[i], cat) == 0) return 1;
+    return 0;
+}
+
+static void set_categories(Instance *inst, fmi2Boolean on, size_t n, const fmi2String categories[]) {
+    inst->host_logging = on != 0;
+    inst->n_categories = 0;
+    if (!on || categories == NULL || n > MAX_CATEGORIES) return;  /* too many to keep: all categories */
+    for (size_t i = 0; i < n; i++)
+        if (categories[i] != NULL)
+            snprintf(inst->categories[inst->n_categories++], sizeof inst->categories[0], "%s", categories[i]);
+}
+
 /* The logger pythonfmu calls: format, then pass to the host's logger with a category that is never NULL. */
 static void forward_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
                            fmi2String message, ...) {
@@ -269,6 +305,12 @@ static void forward_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2St
         va_end(ap);
     }
     if (text == NULL) text = stack;
+    if (inst != NULL && inst->in_exit_initialization && status == fmi2Fatal)
+        status = fmi2Error;  /* the message goes with the status the call returns (fmi2ExitInitializationMode) */
+    if (inst != NULL && !pass_message(inst, status, category)) {
+        if (text != stack) free(text);
+        return;
+    }
     if (category == NULL || category[0] == '\0') category = status_category(status);
     if (inst != NULL && inst->host_logger != NULL) {
         fmi2CallbackFunctions f = {inst->host_logger, NULL, NULL, NULL, NULL};
@@ -520,11 +562,14 @@ static int ensure_loaded(void) {
     }
     fmi.Instantiate = (InstantiateFn)lib_sym(lib, "fmi2Instantiate");
     fmi.FreeInstance = (FreeInstanceFn)lib_sym(lib, "fmi2FreeInstance");
+    fmi.SetDebugLogging = (SetDebugLoggingFn)lib_sym(lib, "fmi2SetDebugLogging");
+    fmi.ExitInitializationMode = (ExitInitializationModeFn)lib_sym(lib, "fmi2ExitInitializationMode");
     fmi.GetDirectionalDerivative = (GetDirectionalDerivativeFn)lib_sym(lib, "fmi2GetDirectionalDerivative");
 #define RESOLVE_FMI(ret, name, params, args) fmi.name = (ret(*) params)lib_sym(lib, "fmi2" #name);
     FMI2_FUNCTIONS(RESOLVE_FMI)
 #undef RESOLVE_FMI
-    if (fmi.Instantiate == NULL || fmi.FreeInstance == NULL || fmi.DoStep == NULL) {
+    if (fmi.Instantiate == NULL || fmi.FreeInstance == NULL || fmi.DoStep == NULL || fmi.SetDebugLogging == NULL ||
+        fmi.ExitInitializationMode == NULL) {
         snprintf(load_error, sizeof load_error, "%s does not export the FMI 2.0 functions", target);
         return 0;
     }
@@ -563,6 +608,17 @@ EXPORT const fmi2CallbackFunctions *bearingLoaderHostCallbacks(const void *env) 
     return found;
 }
 
+/* For HostLogger: the slave has just sent an error to the host directly (see pass_message). */
+EXPORT void bearingLoaderDirectError(void *env) {
+    LOCK();
+    for (int i = 0; i < MAX_LIVE; i++)
+        if (env != NULL && live[i] == (Instance *)env) {
+            live[i]->direct_error = 1;
+            break;
+        }
+    UNLOCK();
+}
+
 /* ---- exported FMI 2.0 functions ------------------------------------------------------------------- */
 EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char *fmi2GetVersion(void) { return "2.0"; }
@@ -593,9 +649,11 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type type, fmi
     inst->callbacks.stepFinished = functions && functions->stepFinished ? forward_step_finished : NULL;
     inst->callbacks.componentEnvironment = inst;
     snprintf(inst->name, sizeof inst->name, "%s", instanceName ? instanceName : "");
+    inst->host_logging = loggingOn != 0;
     attach_thread();
     remember(inst, 1);
-    inst->inner = fmi.Instantiate(instanceName, type, guid, resourceLocation, &inst->callbacks, visible, loggingOn);
+    /* pythonfmu's logging always on: the loader filters (pass_message) */
+    inst->inner = fmi.Instantiate(instanceName, type, guid, resourceLocation, &inst->callbacks, visible, 1);
     if (inst->inner == NULL) {
         remember(inst, 0);
         free(inst);
@@ -618,11 +676,40 @@ EXPORT void fmi2FreeInstance(fmi2Component c) {
         if (c == NULL) return fmi2Error;                                                          \
         attach_thread();                                                                          \
         fmi2Component outer = c;                                                                  \
+        ((Instance *)outer)->direct_error = 0;                                                    \
         c = ((Instance *)outer)->inner;                                                           \
         return fmi.name args;                                                                     \
     }
 FMI2_FUNCTIONS(FORWARD)
 #undef FORWARD
+
+/* The host's logging wish is the loader's filter; pythonfmu's own logging stays on (see pass_message). */
+EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n, const fmi2String categories[]) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    fmi2Status status = fmi.SetDebugLogging(inst->inner, 1, 0, NULL);
+    if (status <= fmi2Warning) set_categories(inst, loggingOn, n, categories);
+    return status;
+}
+
+/* pythonfmu 0.7 returns fmi2Fatal for any exception in exit_initialization_mode. Our slaves (BallBearing,
+   JournalClearance, SliderCrank) raise there only after validating, before assigning anything that a later
+   call depends on (the instance keeps no half-built model: doStep refuses until a successful
+   initialisation), and keep no state shared between instances; so the instance is intact and only this
+   call failed: fmi2Error in FMI 2.0's terms (the host may free or reset it). Departure from pythonfmu
+   documented in docs/fmu-interface.md ("Errors"). */
+EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    inst->in_exit_initialization = 1;
+    fmi2Status status = fmi.ExitInitializationMode(inst->inner);
+    inst->in_exit_initialization = 0;
+    return status == fmi2Fatal ? fmi2Error : status;
+}
 
 /* d unknown / d known from the FMU's tangent outputs: DD_TABLE rows {unknown vr, known vr, source vr}. */
 EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown[], size_t nUnknown,

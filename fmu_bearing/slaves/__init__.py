@@ -143,6 +143,7 @@ class HostLogger:
 
     def __init__(self, address, instance_name, resources=None):
         self._call = None
+        self._note_error = None
         if not address or not sys.platform.startswith("linux") or platform.machine() not in ("x86_64", "AMD64"):
             return
         name = str(instance_name).encode("utf-8")
@@ -157,9 +158,10 @@ class HostLogger:
                 return
             functions = words[9]                                         # fmi2CallbackFunctions*
             callbacks = (ctypes.c_void_p * 5).from_address(functions)
-            host = _loader_host_callbacks(resources, callbacks[4])
+            host, note = _loader_host_callbacks(resources, callbacks[4])
             if host:   # pythonfmu was given the loader's callbacks (fmu_bearing/native): look behind them
                 functions = host
+                self._note_error = note   # so the loader drops pythonfmu's repeat of this error (logging off)
                 callbacks = (ctypes.c_void_p * 5).from_address(functions)
             if not callbacks[0]:
                 return
@@ -187,16 +189,20 @@ class HostLogger:
         category = category or STATUS_CATEGORIES.get(int(status), "logAll")
         try:
             self._call(self._environment, self._name, int(status), category.encode(), str(message))
+            if self._note_error is not None and int(status) >= 3:
+                self._note_error()
         except Exception:   # never let a logging problem fail the FMU
             return False
         return True
 
 
-def _loader_host_callbacks(resources, environment) -> int:
-    """The host's fmi2CallbackFunctions* behind ``environment`` when it is one of the FMU loader's instances
-    (``bearingLoaderHostCallbacks`` of fmu_bearing/native/loader.c, the FMU's binary), else 0."""
+def _loader_host_callbacks(resources, environment):
+    """(the host's fmi2CallbackFunctions* behind ``environment``, a function that tells the loader an error
+    went to the host directly) when ``environment`` is one of the FMU loader's instances
+    (``bearingLoaderHostCallbacks``/``bearingLoaderDirectError`` of fmu_bearing/native/loader.c, the FMU's
+    binary), else (0, None)."""
     if not resources or not environment:
-        return 0
+        return 0, None
     binaries = os.path.join(os.path.dirname(os.path.abspath(resources)), "binaries")
     for path in sorted(glob.glob(os.path.join(binaries, "*", "*"))):
         stem, ext = os.path.splitext(os.path.basename(path))
@@ -209,8 +215,12 @@ def _loader_host_callbacks(resources, environment) -> int:
         function.restype, function.argtypes = ctypes.c_void_p, [ctypes.c_void_p]
         found = function(ctypes.c_void_p(environment))
         if found:
-            return int(found)
-    return 0
+            note = getattr(ctypes.CDLL(path), "bearingLoaderDirectError", None)
+            if note is not None:
+                note.restype, note.argtypes = None, [ctypes.c_void_p]
+                note = partial(note, ctypes.c_void_p(environment))
+            return int(found), note
+    return 0, None
 
 
 def _call_native(function, environment, name, status, category, message):
