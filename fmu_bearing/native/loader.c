@@ -35,6 +35,13 @@
  *     the handler runs at process exit, not at dlclose, and the interpreter outlives any reload;
  *   - never passes a NULL category to the host's logger (pythonfmu's own messages go through a wrapper),
  *     and tells the FMU's Python side the host's own callbacks (bearingLoaderHostCallbacks);
+ *   - keeps pythonfmu's logging always on (fmi2Instantiate, fmi2SetDebugLogging) and filters by the host's
+ *     wish: errors (fmi2Error, fmi2Fatal) always reach the host, e.g. an ImportError of a damaged FMU
+ *     that only pythonfmu can report; other messages only with the host's logging on, in its categories;
+ *     pythonfmu's repeat of an error the slave already sent directly (bearingLoaderDirectError) is
+ *     dropped with logging off (see pass_message);
+ *   - returns fmi2Error, not pythonfmu's fmi2Fatal, from a failed fmi2ExitInitializationMode: our slaves
+ *     leave the instance intact there (docs/fmu-interface.md, "Errors");
  *   - implements fmi2GetDirectionalDerivative from the FMU's tangent outputs when the build gives it a
  *     table (unknown, known) -> output holding d unknown / d known (see fmu_bearing/native/build.py);
  *     pythonfmu 0.7 does not support that call.
