@@ -110,6 +110,9 @@ class CouplingLoop:
         self.system, self.settings, self.observe = system, settings, observe
         self.link, self.endpoint, self.reaction_force = link, endpoint, reaction_force
         self.sample_names = list(endpoint.sample_names) if endpoint is not None else []
+        # a step whose end is sampled may fetch the samples with the coupling outputs (FmuEndpoint)
+        self._exchange_sampled = (getattr(endpoint, "exchange_sampled", None) or endpoint.exchange
+                                  if endpoint is not None and self.sample_names else None)
         self.columns = list(BASE_COLUMNS) + [c for c in self.sample_names if c not in BASE_COLUMNS]
         self.n = system.n
         self.scheme = make_scheme(settings.scheme) if endpoint is not None else None
@@ -239,7 +242,8 @@ class CouplingLoop:
         settings, scheme, endpoint, system = self.settings, self.scheme, self.endpoint, self.system
         fm = None
         if endpoint is not None:
-            pending = endpoint.exchange(t0, h, self.inputs) if scheme.ordering == "jacobi" else None
+            exchange = endpoint.exchange if rec is None or self._exchange_sampled is None else self._exchange_sampled
+            pending = exchange(t0, h, self.inputs) if scheme.ordering == "jacobi" else None
             scheme.begin_step(t0, h)
             m = substeps(h, scheme.past[-1], self.mobility, settings.substep_limit,
                          settings.max_substeps) if scheme.uses_tangent else 1
@@ -282,7 +286,7 @@ class CouplingLoop:
             if scheme.ordering == "jacobi":
                 out, used = pending, self.inputs
             else:
-                out, used = endpoint.exchange(t0, h, u), u
+                out, used = exchange(t0, h, u), u
             if not math.isfinite(sum(out)):
                 raise RunFailure(step, t, f"the bearing returned a non-finite force {out[:2]}")
             scheme.push(Exchanged(t, *used[:4], *out))
@@ -371,6 +375,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     from tqdm import tqdm  # here, not at the top: SliderCrank.fmu packs this module and needs no tqdm at runtime
     bar = tqdm(total=n_steps, desc=settings.description, unit="step", disable=not settings.progress,
                mininterval=0.5, leave=False)
+    poll = getattr(observe, "poll", None) if loop.kernels and loop._observe_in_kernel else None
     try:
         loop.start(y)
         loop.record(rec, 0.0, y)
@@ -380,6 +385,8 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
             y = loop.advance(y, t0, h, step, t, rec if step % every == 0 else None)
             if step % 500 == 0:
                 bar.update(500)
+                if poll is not None:   # e.g. a signal noted by the driver (mechanism.run), when observe is compiled
+                    poll(t)
     except RunFailure as err:
         info["failure"] = {"step": err.step, "time_s": err.time, "cause": err.cause}
         return finish(rec, info, "failed", str(err), endpoint, bar, loop)
