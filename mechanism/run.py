@@ -26,7 +26,6 @@ from mechanism.cosim.coupling import DEFAULT_SCHEME
 from mechanism.cosim.endpoints import InProcessEndpoint, fmu_endpoint
 from mechanism.cosim.joint import BearingLink
 from mechanism.cosim.master import MasterSettings, RunFailure, run_master
-from mechanism.cosim.monolithic import run_monolithic
 from mechanism.cosim.record import RunResult
 from mechanism.multibody.solver import System
 from mechanism.systems.slider_crank import (SliderCrankParameters, build, ideal_reaction, initial_state,
@@ -241,6 +240,7 @@ def _run(config: RunConfig) -> RunResult:
     if config.mode == "monolithic":
         if config.joint != "bearing":
             raise ValueError("the monolithic reference is implemented for the ball bearing only")
+        from mechanism.cosim.monolithic import run_monolithic   # scipy's integrators: imported when used
         bearing = BallBearing(bearing_parameters(config.component_settings))
         meta["contact_stiffness_N_m1.5"] = bearing.stiffness
         return run_monolithic(system, link, bearing, q0, qd0, t_end, config.output_interval, observe,
