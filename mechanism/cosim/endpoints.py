@@ -343,6 +343,10 @@ class FmuEndpoint(_FmuBase):
         self._c_set, self._c_step, self._c_get, self._c_get_int, self._c_get_bool = (
             functions[f] for f in ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal", "fmi2GetInteger", "fmi2GetBoolean"))
         self._sampled = False     # _val_sr holds this step's real samples (exchange_sampled)
+        nr, ni = len(self._val_sr), len(self._val_si)
+        self._views = (np.ctypeslib.as_array(self._val_sr) if nr else None,     # for sample_into
+                       np.ctypeslib.as_array(self._val_si) if ni else None,
+                       np.ctypeslib.as_array(self._val_sb) if len(self._val_sb) else None, nr, nr + ni)
         self._pad = (0.0,) * (8 - nc) if nc < 8 else ()
         self._slice_out = slice(0, nc)
 
@@ -405,7 +409,13 @@ class FmuEndpoint(_FmuBase):
 
     def sample(self) -> list[float]:
         """The non-coupling outputs at the end of the last step, as floats in the order of ``sample_names``."""
-        fmu, c, status = self.fmu, self.fmu.component, 0
+        self.sample_values()
+        return [*self._val_sr, *map(float, self._val_si), *(float(bool(x)) for x in self._val_sb)]
+
+    def sample_values(self) -> None:
+        """Fetch the non-coupling outputs into the ctypes buffers (reals already there after
+        ``exchange_sampled``)."""
+        c, status = self.fmu.component, 0
         if self._real_samples and not self._sampled:
             status = self._c_get(c, self._vr_sr, len(self._vr_sr), self._val_sr)
         self._sampled = False
@@ -415,7 +425,18 @@ class FmuEndpoint(_FmuBase):
             status = self._c_get_bool(c, self._vr_sb, len(self._vr_sb), self._val_sb)
         if status > 1:
             raise self._fail("sampling the outputs", ExchangeError(f"status {_STATUS[min(status, 5)]}"))
-        return [*self._val_sr, *map(float, self._val_si), *(float(bool(x)) for x in self._val_sb)]
+
+    def sample_into(self, out: np.ndarray) -> None:
+        """``out[:] = sample()`` without the list: the values copied from the ctypes buffers through numpy
+        views (the master's recorded row; columns in the order of ``sample_names``)."""
+        self.sample_values()
+        real, integer, boolean, nr, ni = self._views
+        if real is not None:
+            out[:nr] = real
+        if integer is not None:
+            out[nr:ni] = integer
+        if boolean is not None:
+            out[ni:] = boolean != 0
 
 
 class Fmu3Endpoint(_FmuBase):

@@ -171,6 +171,9 @@ class CouplingLoop:
         if len(self._sample_cols) and np.array_equal(np.diff(self._sample_cols), np.ones(len(self._sample_cols) - 1)):
             self._sample_cols = slice(int(self._sample_cols[0]), int(self._sample_cols[-1]) + 1)   # a faster write
         self._no_row = np.zeros(0)
+        # an endpoint that copies its samples into the row (FmuEndpoint) when they are contiguous columns
+        into = getattr(self.endpoint, "sample_into", None)
+        self._sample_into = into if isinstance(self._sample_cols, slice) else None
         probe = getattr(self.reaction_force, "probe", None)   # (joint rows start, stop, x column, y column)
         self._react = np.array(probe if probe is not None and self.link is None else (), np.int64)
 
@@ -192,6 +195,8 @@ class CouplingLoop:
         if self.link is None:
             if not len(self._react):
                 row[rec.index["F_x"]], row[rec.index["F_y"]] = self.reaction_force(y[:n], self._lam)
+        elif self._sample_into is not None:
+            self._sample_into(row[self._sample_cols])
         elif self.sample_names:
             row[self._sample_cols] = self.endpoint.sample()
         if not self._observe_in_kernel:
