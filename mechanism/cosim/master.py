@@ -132,6 +132,9 @@ class CouplingLoop:
         self.substeps_max = 1
         self.substeps_total = 0
         self.iterations = {"steps": 0, "passes": 0, "max_passes": 0, "not_converged": 0}
+        #: ring speeds sent with the last exchange when they differ from the end-of-step ones (secant
+        #: schemes): the samples' omega_inner/omega_outer columns record these, the component's inputs
+        self.sent_ring_speeds = None
         n, scheme, applied = self.n, self.scheme, system.applied_forces
 
         def rhs(tau, y):
@@ -211,6 +214,8 @@ class CouplingLoop:
         if self.energy is not None and self.link is not None:
             for name, value in self.energy.update(t, y[:n], y[n:], self._lam).items():
                 row[rec.index[name]] = value
+        if self.sent_ring_speeds is not None:     # the ring speeds the component was given (secant schemes)
+            row[rec.index["omega_inner"]], row[rec.index["omega_outer"]] = self.sent_ring_speeds
 
     def _k1_valid(self, y: np.ndarray, t0: float, fm: np.ndarray) -> bool:
         """True if the stored end-of-step evaluation is this step's first RK4 stage (same state, time
@@ -301,6 +306,7 @@ class CouplingLoop:
                 out, used = pending, self.inputs
             else:
                 sent = u if scheme.ring_speeds == "end" else self.link.secant_ring_speeds(u, y_start[:n], y[:n], h)
+                self.sent_ring_speeds = sent[4:] if sent is not u else None
                 out, used = endpoint.exchange(t0, h, sent), u
             if not math.isfinite(sum(out)):
                 raise RunFailure(step, t, f"the bearing returned a non-finite force {out[:2]}")
@@ -384,6 +390,8 @@ class CouplingLoop:
         row["kinetic_energy"] = system.kinetic_energy(qd)
         if self.energy is not None:
             row.update(self.energy.update(t, q, qd, lam))
+        if self.sent_ring_speeds is not None:     # the ring speeds the component was given (secant schemes)
+            row["omega_inner"], row["omega_outer"] = self.sent_ring_speeds
         return row
 
     def snapshot(self):
