@@ -1,6 +1,6 @@
-"""The whole system as SSP (dist/SliderCrankBearing.ssp: the SliderCrank and BallBearing FMUs, their
+"""The whole system as SSP (SliderCrankBearing.ssp: the SliderCrank and BallBearing FMUs, their
 connections and parameter sets) in each FMI engine: fmpy.ssp, libcosim and ecos, then our own master on
-the same archive. Packs the archive first if it is missing.
+the same archive. Packs the archive first (into results/examples/).
 
     python examples/ssp_in_each_engine.py [--short]
 """
@@ -13,10 +13,11 @@ from _common import ROOT, short
 
 from mechanism.ssp.tools import TOOLS, simulate_with   # noqa: E402
 
-archive = ROOT / "dist" / "SliderCrankBearing.ssp"
-if not archive.is_file():
-    subprocess.run([sys.executable, "-m", "mechanism", "ssp-pack", "--out", str(archive),
-                    "--fmu-dir", str(ROOT / "dist")], check=True, cwd=ROOT)
+# pack a fresh archive (the FMUs are rebuilt only when their sources changed): an archive left in dist/ by
+# an older checkout may hold other FMUs or parameter sets
+archive = ROOT / "results" / "examples" / "SliderCrankBearing.ssp"
+subprocess.run([sys.executable, "-m", "mechanism", "ssp-pack", "--out", str(archive), "--fmu-dir", str(ROOT / "dist")],
+               check=True, cwd=ROOT)
 t_end = 0.002 if short() else 0.02          # s (1200 rpm: 0.05 s per revolution)
 peaks = {}
 for tool in TOOLS:

@@ -23,6 +23,7 @@ from fmu_bearing.parameters import validate as validate_bearing
 from mechanism.cosim.adaptive import AdaptiveSettings
 from mechanism.cosim.adaptive import run_adaptive as run_adaptive_master
 from mechanism.cosim.coupling import DEFAULT_SCHEME
+from mechanism.cosim.energy import EnergyAccount
 from mechanism.cosim.endpoints import InProcessEndpoint, fmu_endpoint
 from mechanism.cosim.joint import BearingLink
 from mechanism.cosim.master import MasterSettings, RunFailure, run_master
@@ -150,6 +151,14 @@ def clearance_per_side(config: RunConfig) -> float:
     return 0.0
 
 
+def energy_account(config: RunConfig, system: System, link: BearingLink) -> EnergyAccount | None:
+    """The run's energy account (``mechanism.cosim.energy``): the ball bearing's law in-process; None for
+    the journal-clearance joint (its account is not implemented)."""
+    if config.joint != "bearing":
+        return None
+    return EnergyAccount(system, link, BallBearing(bearing_parameters(config.component_settings)))
+
+
 class Interrupted(RunFailure):
     """Raised inside the master (at a sample) after SIGINT/SIGTERM: the run stops with the samples so far."""
 
@@ -255,7 +264,8 @@ def _run(config: RunConfig) -> RunResult:
         endpoint = fmu_endpoint(path, config.component_settings, instance_name=config.joint)  # FMI 2 or 3
         meta["fmu"] = str(path)
     try:
-        return run_master(system, q0, qd0, settings, observe, link=link, endpoint=endpoint, meta=meta)
+        return run_master(system, q0, qd0, settings, observe, link=link, endpoint=endpoint, meta=meta,
+                          energy=energy_account(config, system, link))
     finally:
         endpoint.close()
 
@@ -286,7 +296,8 @@ def run_adaptive(config, tol: float, initial_step: float | None = None, **settin
         meta["fmu"] = str(path)
     start = time.perf_counter()
     try:
-        result = run_adaptive_master(system, q0, qd0, adaptive, observe, link, endpoint, meta)
+        result = run_adaptive_master(system, q0, qd0, adaptive, observe, link, endpoint, meta,
+                                     energy=energy_account(config, system, link))
     finally:
         endpoint.close()
     result.meta["wall_time_s"] = time.perf_counter() - start

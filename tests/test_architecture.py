@@ -135,3 +135,18 @@ def test_no_import_circle():
     for node in sorted(graph):
         if node not in state:
             visit(node)
+
+
+#: third-party packages the FMU's runtime code may import: the slaves need their exporter; nothing else
+RUNTIME_EXTRA = {"fmu_bearing.slaves": {"pythonfmu", "pythonfmu3"}}
+
+
+@pytest.mark.parametrize("name", sorted(n for n in MODULES if n.startswith("fmu_bearing")
+                                        and not n.startswith("fmu_bearing.native")))
+def test_fmu_runtime_imports_only_the_standard_library(name):
+    """What the FMUs pack and run (fmu_bearing less the build-time native/ folder) needs no numpy or scipy."""
+    import sys
+    extra = next((v for k, v in RUNTIME_EXTRA.items() if name == k or name.startswith(k + ".")), set())
+    tops = {t.split(".")[0] for t in _imports(name, MODULES[name])}
+    foreign = sorted(t for t in tops if t not in sys.stdlib_module_names and t != "fmu_bearing" and t not in extra)
+    assert not foreign, f"{name} imports {foreign} (the FMU's runtime is the standard library only)"

@@ -29,12 +29,19 @@ is reached exactly (samples need no interpolation, H <= output_interval) and the
 rarely: the default scheme's drift term d_n is estimated over the previous step and extrapolated
 over the next one, which favours piecewise-constant steps.
 
-The coupling inside is the default scheme (``jacobian-drift``, ``mechanism.cosim.coupling``); each step
-is ``master.CouplingLoop.advance``, the same code the fixed-step master runs.
+The coupling inside is the run's scheme (``settings.scheme``, default ``jacobian-implicit``,
+``mechanism.cosim.coupling``); each step is ``master.CouplingLoop.communicate``, the same code the
+fixed-step master runs (an iterative scheme repeats each of the three steps with its own rollback).
 
-Cost per attempt: three component steps (one of H, two of H/2), one get-state and one set-state
+Cost per attempt (non-iterative scheme): three component steps (one of H, two of H/2), one get-state and one set-state
 (two on rejection); ``meta`` reports accepted and rejected steps, mean/min/max accepted step H
 (the state advances with two H/2 steps per accepted H), component calls and state saves/restores.
+
+Contact onsets (issue 12): with the paper's constant damping a ball's force jumps by C v_r when it
+enters the load zone, an O(H) impulse error in a step that straddles the onset, which the error
+estimate sees only partly. With ``contact_step`` set, a step across which the component's
+loaded-ball count changes is rejected (err = 2, the step halves) until H <= ``contact_step``: the
+onsets and releases are resolved to that step (``meta["contact_rejections"]`` counts them).
 
 What ``tol`` does and does not bound: it bounds the *local* error of each macro step relative to
 the signal amplitude. The global error against the reference is measured by the step-size study
@@ -73,6 +80,7 @@ class AdaptiveSettings(MasterSettings):
     v_floor: float = 1e-3                # relative velocity scale floor [m/s]
     patience: int = 4                    # accepted steps with room to spare before the step doubles
     keep_history: bool = False           # meta["step_history"]: (t, H, err, accepted) of every attempt
+    contact_step: float | None = None    # reject a step whose loaded-ball count changes while H > this [s]
     description: str = "adaptive co-simulation"
 
     def __post_init__(self):
@@ -87,7 +95,8 @@ LEVELS = 30
 
 
 def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: AdaptiveSettings,
-                 observe: Observer, link: BearingLink, endpoint, meta: dict | None = None) -> RunResult:
+                 observe: Observer, link: BearingLink, endpoint, meta: dict | None = None,
+                 energy=None) -> RunResult:
     """Integrate to ``settings.t_end`` with adaptive communication steps and rollback (see the module docstring).
 
     ``endpoint`` must offer ``get_state``/``set_state``/``free_state`` (``FmuEndpoint`` needs an FMU
@@ -96,12 +105,14 @@ def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Adap
     dt_out = settings.output_interval
     n_out = int(round(settings.t_end / dt_out))
     h_max = min(settings.h_max or dt_out, dt_out)
-    loop = CouplingLoop(system, settings, observe, link, endpoint)
+    loop = CouplingLoop(system, settings, observe, link, endpoint, energy=energy)
     rec = Recorder(loop.columns, n_out + 2)
     info = dict(meta or {})
     info.update(output_interval_s=dt_out, t_end_s=n_out * dt_out, scheme="adaptive", inner_scheme=loop.scheme.name,
                 endpoint=getattr(endpoint, "kind", "none"), tol=settings.tol)
-    counts = {"accepted": 0, "rejected": 0, "failed_trials": 0, "saves": 0, "restores": 0}
+    counts = {"accepted": 0, "rejected": 0, "failed_trials": 0, "saves": 0, "restores": 0, "contact_rejections": 0}
+    contact_step = settings.contact_step
+    loaded_index = list(loop.sample_names).index("loaded_balls") if contact_step is not None else -1
     steps: list[float] = []
     y = np.concatenate((q0, qd0)).astype(float)
     # dyadic steps: H = dt_out / 2^level, times counted in ticks of dt_out / 2^LEVELS (exact)
@@ -124,6 +135,8 @@ def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Adap
         while tick < n_out * ticks_out:
             t = tick * dt_out / ticks_out
             snap = loop.snapshot()
+            if contact_step is not None:
+                loaded_before = loop.endpoint.sample()[loaded_index]
             counts["saves"] += 1
             try:
                 while True:
@@ -136,18 +149,23 @@ def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Adap
                     t_half = (tick + dticks // 2) * dt_out / ticks_out
                     t_new = (tick + dticks) * dt_out / ticks_out
                     try:
-                        loop.advance(y, t, H, attempt, t_new)
+                        loop.communicate(y, t, H, attempt, t_new)
                         u_big = loop.inputs
                         loop.restore(snap)
                         counts["restores"] += 1
-                        y_half = loop.advance(y, t, t_half - t, attempt, t_half)
-                        y_small = loop.advance(y_half, t_half, t_new - t_half, attempt, t_new)
+                        y_half = loop.communicate(y, t, t_half - t, attempt, t_half)
+                        y_small = loop.communicate(y_half, t_half, t_new - t_half, attempt, t_new)
                         u_small = loop.inputs
                         de = math.hypot(u_small[0] - u_big[0], u_small[1] - u_big[1])
                         dv = math.hypot(u_small[2] - u_big[2], u_small[3] - u_big[3])
                         e_scale = max(e_amp, math.hypot(u_small[0], u_small[1]))
                         v_scale = max(v_amp, math.hypot(u_small[2], u_small[3]))
                         err = max(de / e_scale, dv / v_scale) / settings.tol
+                        if contact_step is not None and H > contact_step:
+                            now = loop.endpoint.sample()[loaded_index]
+                            if now != loaded_before:             # a contact onset or release inside: refine
+                                counts["contact_rejections"] += 1
+                                err = max(err, 2.0)
                     except Exception:  # an error status from the FMU, divergence: a rejected trial
                         counts["failed_trials"] += 1
                         err = math.inf
@@ -188,7 +206,8 @@ def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Adap
         result = finish(rec, info, "completed", "", endpoint, bar, loop)
     arr = np.asarray(steps)
     result.meta.update(accepted_steps=counts["accepted"], rejected_steps=counts["rejected"],
-                       failed_trials=counts["failed_trials"], state_saves=counts["saves"],
+                       failed_trials=counts["failed_trials"], contact_rejections=counts["contact_rejections"],
+                       state_saves=counts["saves"],
                        state_restores=counts["restores"],
                        step_s=float(arr.mean()) if arr.size else 0.0,
                        mean_step_s=float(arr.mean()) if arr.size else 0.0,

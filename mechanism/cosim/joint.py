@@ -41,6 +41,16 @@ class BearingLink:
         xj, yj, vxj, vyj = self.system.point_state(q, qd, self.joint.journal)
         return xj - xi, yj - yi, vxj - vxi, vyj - vyi, float(qd[self._theta_j]), float(qd[self._theta_i])
 
+    def ring_angles(self, q: np.ndarray) -> tuple[float, float]:
+        """(theta_journal, theta_housing) [rad]: the absolute angles of the inner and outer ring bodies."""
+        return float(q[self._theta_j]), float(q[self._theta_i])
+
+    def secant_ring_speeds(self, u: tuple, q0: np.ndarray, q1: np.ndarray, h: float) -> tuple:
+        """``u`` with its ring speeds replaced by (theta(t + h) - theta(t)) / h of journal and housing:
+        held over the step, they make the component's cage angle (eq. 16 integrated) exact."""
+        return (*u[:4], float(q1[self._theta_j] - q0[self._theta_j]) / h,
+                float(q1[self._theta_i] - q0[self._theta_i]) / h)
+
     def generalized_force(self, q: np.ndarray, e_x: float, e_y: float, F_x: float, F_y: float,
                           Q: np.ndarray | None = None) -> np.ndarray:
         """Generalized forces of F on the housing body and -F on the journal body, eq. (20)-(23).

@@ -19,6 +19,11 @@ A failure (an error status from the component, a non-finite state, constraints d
 beyond ``max_constraint_violation``) stops the run with a message naming the step, the
 time and the cause; the samples recorded so far are kept and the component is always freed.
 
+An iterative scheme (``jacobian-implicit``, the default) repeats steps 2-3 with rollback until the
+end-of-step exchange converges (``CouplingLoop.communicate``; the component's state is restored by
+its get/set FMU state). An energy account (``mechanism.cosim.energy``), if given, adds its columns
+to every sample.
+
 The step itself (1-3) and the sample (4) live in ``CouplingLoop``, shared with the adaptive
 driver (``mechanism.cosim.adaptive``), which also uses its ``snapshot``/``restore`` to roll back.
 """
@@ -31,6 +36,8 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 
 from mechanism.cosim.coupling import DEFAULT_SCHEME, Exchanged, make_scheme
+from mechanism.cosim.coupling.implicit import onset_jumps
+from mechanism.cosim.energy import ENERGY_COLUMNS, EnergyAccount
 from mechanism.cosim.joint import BearingLink
 from mechanism.cosim.record import BASE_COLUMNS, Recorder, RunResult
 from mechanism.multibody.integrators import rk4_step
@@ -68,6 +75,8 @@ class MasterSettings:
     max_constraint_violation: float = 1e-4   # |Phi| beyond this [m or rad] is divergence
     progress: bool = True
     description: str = "co-simulation"
+    max_iterations: int = 8              # iterated schemes: passes per step at most (then accepted, counted)
+    iteration_tol: float = 1e-7          # iterated schemes: end force / eccentricity agreement (relative)
     kernels: bool = True                 # compiled step (mechanism.multibody.kernels); False: the NumPy reference
 
 
@@ -106,14 +115,18 @@ class CouplingLoop:
 
     def __init__(self, system: System, settings: MasterSettings, observe: Observer,
                  link: BearingLink | None = None, endpoint: Endpoint | None = None,
-                 reaction_force: Callable[[np.ndarray, np.ndarray], tuple[float, float]] | None = None):
+                 reaction_force: Callable[[np.ndarray, np.ndarray], tuple[float, float]] | None = None,
+                 energy: EnergyAccount | None = None):
         self.system, self.settings, self.observe = system, settings, observe
+        self.energy = energy
         self.link, self.endpoint, self.reaction_force = link, endpoint, reaction_force
         self.sample_names = list(endpoint.sample_names) if endpoint is not None else []
         # a step whose end is sampled may fetch the samples with the coupling outputs (FmuEndpoint)
         self._exchange_sampled = (getattr(endpoint, "exchange_sampled", None) or endpoint.exchange
                                   if endpoint is not None and self.sample_names else None)
         self.columns = list(BASE_COLUMNS) + [c for c in self.sample_names if c not in BASE_COLUMNS]
+        if energy is not None:
+            self.columns += list(ENERGY_COLUMNS)
         self.n = system.n
         self.scheme = make_scheme(settings.scheme) if endpoint is not None else None
         self.inputs = None
@@ -121,6 +134,10 @@ class CouplingLoop:
         self.mobility = 0.0
         self.substeps_max = 1
         self.substeps_total = 0
+        self.iterations = {"steps": 0, "passes": 0, "max_passes": 0, "not_converged": 0}
+        #: ring speeds sent with the last exchange when they differ from the end-of-step ones (secant
+        #: schemes): the samples' omega_inner/omega_outer columns record these, the component's inputs
+        self.sent_ring_speeds = None
         n, scheme, applied = self.n, self.scheme, system.applied_forces
 
         def rhs(tau, y):
@@ -202,6 +219,11 @@ class CouplingLoop:
         if not self._observe_in_kernel:
             for name, value in self.observe(y[:n], y[n:], self._dy[n:], self._lam, t).items():
                 row[rec.index[name]] = value
+        if self.energy is not None and self.link is not None:
+            for name, value in self.energy.update(t, y[:n], y[n:], self._lam).items():
+                row[rec.index[name]] = value
+        if self.sent_ring_speeds is not None:     # the ring speeds the component was given (secant schemes)
+            row[rec.index["omega_inner"]], row[rec.index["omega_outer"]] = self.sent_ring_speeds
 
     def _k1_valid(self, y: np.ndarray, t0: float, fm: np.ndarray) -> bool:
         """True if the stored end-of-step evaluation is this step's first RK4 stage (same state, time
@@ -244,6 +266,7 @@ class CouplingLoop:
         """
         if t is None:
             t = t0 + h
+        y_start = y
         settings, scheme, endpoint, system = self.settings, self.scheme, self.endpoint, self.system
         fm = None
         if endpoint is not None:
@@ -291,7 +314,9 @@ class CouplingLoop:
             if scheme.ordering == "jacobi":
                 out, used = pending, self.inputs
             else:
-                out, used = exchange(t0, h, u), u
+                sent = u if scheme.ring_speeds == "end" else self.link.secant_ring_speeds(u, y_start[:n], y[:n], h)
+                self.sent_ring_speeds = sent[4:] if sent is not u else None
+                out, used = exchange(t0, h, sent), u
             if not math.isfinite(sum(out)):
                 raise RunFailure(step, t, f"the bearing returned a non-finite force {out[:2]}")
             scheme.push(Exchanged(t, *used[:4], *out))
@@ -302,6 +327,45 @@ class CouplingLoop:
             rec.add(self.row(t, y))
         return y
 
+    def communicate(self, y: np.ndarray, t0: float, h: float, step: int, t: float | None = None,
+                    rec: Recorder | None = None) -> np.ndarray:
+        """One communication step: ``advance``, or for an iterative scheme (strong coupling) ``advance``
+        repeated with rollback (FMU get/set state) until two passes' end-of-step force and eccentricity
+        agree to ``settings.iteration_tol`` or ``settings.max_iterations`` passes were made. With ``rec`` the
+        sample at the end of the step is appended (as ``advance`` does)."""
+        scheme = self.scheme
+        if scheme is None or not scheme.iterative:
+            return self.advance(y, t0, h, step, t, rec)
+        stats, limit = self.iterations, max(2, self.settings.max_iterations)
+        energy, n = self.energy, self.n
+        start = scheme.past[-1]
+        cage_start = energy.cage_angle(y[:n]) if energy is not None else 0.0
+        snap = self.snapshot()
+        previous = None
+        try:
+            for passes in range(1, limit + 1):
+                y_end = self.advance(y, t0, h, step, t)
+                end = scheme.past[-1]
+                jumps = () if energy is None else onset_jumps(energy.bearing, start, cage_start, end,
+                                                              energy.cage_angle(y_end[:n]))
+                if previous is not None and scheme.converged(
+                        previous, end, self.settings.iteration_tol, max(1e-6, math.hypot(end.e_x, end.e_y))):
+                    break
+                if passes == limit:
+                    stats["not_converged"] += 1
+                    break
+                previous = end
+                self.restore(snap)
+                scheme.set_trial(end, jumps)
+        finally:
+            scheme.set_trial(None)
+            self.release(snap)
+        stats["steps"] += 1
+        stats["passes"] += passes
+        stats["max_passes"] = max(stats["max_passes"], passes)
+        if rec is not None:                          # the sample of the accepted (last) pass
+            self.record(rec, t if t is not None else t0 + h, y_end)
+        return y_end
     def record(self, rec: Recorder, t: float, y: np.ndarray) -> None:
         """Append the sample at time t of the state y (the last one ``start``/``advance`` reached) to ``rec``."""
         if not self.kernels:
@@ -333,6 +397,10 @@ class CouplingLoop:
         row["time"] = t
         row["constraint_violation"] = float(np.max(np.abs(system.phi(q, t)))) if system.m else 0.0
         row["kinetic_energy"] = system.kinetic_energy(qd)
+        if self.energy is not None:
+            row.update(self.energy.update(t, q, qd, lam))
+        if self.sent_ring_speeds is not None:     # the ring speeds the component was given (secant schemes)
+            row["omega_inner"], row["omega_outer"] = self.sent_ring_speeds
         return row
 
     def snapshot(self):
@@ -361,8 +429,10 @@ class CouplingLoop:
 def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: MasterSettings,
                observe: Observer, link: BearingLink | None = None, endpoint: Endpoint | None = None,
                reaction_force: Callable[[np.ndarray, np.ndarray], tuple[float, float]] | None = None,
-               meta: dict | None = None) -> RunResult:
+               meta: dict | None = None, energy: EnergyAccount | None = None) -> RunResult:
     """Integrate the mechanism from (q0, qd0) to ``settings.t_end``, co-simulated with ``endpoint`` if given.
+
+    ``energy``: an energy account (``mechanism.cosim.energy``) updated at every sample, adding its columns.
 
     For the ideal joint pass ``link=endpoint=None`` and ``reaction_force(q, lam)`` giving the
     joint's force on the housing body, recorded as F_x, F_y.
@@ -370,7 +440,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     h = settings.step
     n_steps = int(round(settings.t_end / h))
     every = max(1, int(round(settings.output_interval / h)))
-    loop = CouplingLoop(system, settings, observe, link, endpoint, reaction_force)
+    loop = CouplingLoop(system, settings, observe, link, endpoint, reaction_force, energy)
     rec = Recorder(loop.columns, n_steps // every + 2)
     info = dict(meta or {})
     info.update(step_s=h, output_interval_s=every * h, t_end_s=n_steps * h,
@@ -387,7 +457,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
         for step in range(1, n_steps + 1):
             t0 = (step - 1) * h
             t = step * h
-            y = loop.advance(y, t0, h, step, t, rec if step % every == 0 else None)
+            y = loop.communicate(y, t0, h, step, t, rec if step % every == 0 else None)
             if step % 500 == 0:
                 bar.update(500)
                 if poll is not None:   # e.g. a signal noted by the driver (mechanism.run), when observe is compiled
@@ -408,6 +478,10 @@ def finish(rec: Recorder, info: dict, status: str, message: str, endpoint, bar, 
     bar.close()
     info["substeps_max"] = loop.substeps_max
     info["substeps_total"] = loop.substeps_total
+    it = loop.iterations
+    if it["steps"]:
+        info.update(iteration_passes_mean=it["passes"] / it["steps"], iteration_passes_max=it["max_passes"],
+                    iteration_not_converged=it["not_converged"])
     if endpoint is not None:
         info["component_calls"] = endpoint.calls
         if hasattr(endpoint, "life_outputs"):  # bearing rating life at the end (docs/bearing-life.md)

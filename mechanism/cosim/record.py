@@ -18,6 +18,8 @@ UNITS = {
     "cage_angle": "rad", "loaded_balls": "1", "max_ball_load": "N", "penetration": "m",
     "contact_force": "N", "kinetic_energy": "J", "in_contact": "1", "impact_velocity": "m/s",
     "normal_velocity": "m/s", "stiffness_skew": "N/m",
+    "contact_energy": "J", "damping_dissipation": "J", "drive_work": "J", "cage_work": "J", "applied_work": "J",
+    "energy_residual": "J",
 }
 BASE_COLUMNS = ("time", "crank_angle", "e_x", "e_y", "v_x", "v_y", "F_x", "F_y", "slider_x", "slider_v",
                 "slider_a", "crank_moment", "constraint_violation", "omega_inner", "omega_outer",
@@ -80,6 +82,20 @@ class RunResult:
     @property
     def ok(self) -> bool:
         return self.status == "completed"
+
+
+def energy_summary(r: RunResult) -> dict | None:
+    """End-of-run energy figures of a RunResult with the energy account's columns (None without them) [J]."""
+    if not r.has("energy_residual") or len(r["time"]) == 0:
+        return None
+    residual = r["energy_residual"]
+    dissipated = float(r["damping_dissipation"][-1])
+    worst = float(residual[np.nanargmax(np.abs(residual))])
+    return {"kinetic_energy_J": float(r["kinetic_energy"][-1]), "contact_energy_J": float(r["contact_energy"][-1]),
+            "damping_dissipation_J": dissipated, "drive_work_J": float(r["drive_work"][-1]),
+            "cage_work_J": float(r["cage_work"][-1]), "applied_work_J": float(r["applied_work"][-1]),
+            "energy_residual_J": float(residual[-1]), "energy_residual_max_abs_J": abs(worst),
+            "energy_residual_rel_dissipation": float(residual[-1]) / dissipated if dissipated > 0 else None}
 
 
 def resample(result: RunResult, times: np.ndarray) -> RunResult:

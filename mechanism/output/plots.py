@@ -209,6 +209,18 @@ def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None) -> list[Pa
                      fontsize=10)
         paths.append(_save(fig, out / "ball_loads.png"))
 
+    if r.has("energy_residual"):
+        fig, ax = plt.subplots(figsize=(8, 4))
+        for col, label in (("damping_dissipation", "damping dissipation D"), ("contact_energy", "contact energy V"),
+                           ("cage_work", "cage work"), ("energy_residual", "residual (coupling)")):
+            ax.plot(x, r[col] * 1e3, lw=0.8, label=label)
+        ax.set_xlabel("crank angle [π rad]")
+        ax.set_ylabel("energy [mJ]")
+        ax.set_title(f"Energy account: T + V + D - W_drive - W_cage - E_0 = residual ({title})")
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+        paths.append(_save(fig, out / "energy.png"))
+
     if ideal is not None and len(ideal["time"]) >= len(r["time"]):
         k = len(r["time"])
         fig, axes = time_panels()

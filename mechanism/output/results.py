@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cosim.record import RunResult, unit_of
+from ..cosim.record import RunResult, energy_summary, unit_of
 from .life import run_life
 
 
@@ -45,6 +45,9 @@ def summary(r: RunResult) -> dict:
     if len(t) == 0:
         return result
     result["all"] = _figures(r, np.ones_like(t, dtype=bool))
+    energy = energy_summary(r)
+    if energy is not None:
+        result["energy"] = energy
     result["life"] = run_life(r)     # bearing rating life (docs/bearing-life.md); None for other joints
     half = 0.5 * float(r.meta.get("output_interval_s") or 0.0) + 1e-12   # the step count is rounded
     if period and t[-1] >= 2 * period - half:

@@ -19,7 +19,15 @@ jacobian-     jacobian + d_n (tau - t_n), where d_n is the drift of  Gauss-Seide
 drift         the last step not explained by K and C:                             (smaller
 (default)     d_n = [F_n - F_{n-1} - K_{n-1} (e_n - e_{n-1})                     constant)
                      - C_{n-1} (v_n - v_{n-1})] / (t_n - t_{n-1})
+jacobian-     jacobian-drift, the component given the secant ring   Gauss-Seidel nominal 2nd
+secant        speeds (theta_{n+1} - theta_n)/h: its cage angle exact              (implicit.py)
+jacobian-     the step repeated with rollback (FMU get/set state):  Gauss-Seidel nominal 2nd
+implicit      K, C the mean of both ends, d the drift of this step  iterated
+              through F_{n+1} of the last pass (implicit.py)
 ============  =====================================================  ==========  ===============
+
+"accuracy" is the nominal order for a smooth force; the measured orders are lower (the damping
+jump at each contact onset), see docs/coupling.md.
 
 Gauss-Seidel ordering: the mechanism steps first; then the bearing is given the new inputs
 u_{n+1} and steps, so that F_{n+1} is the force at t_{n+1} for the state at t_{n+1}.
@@ -43,12 +51,14 @@ from __future__ import annotations
 from .base import Exchanged, ForceModel, Scheme
 from .extrapolation import LinearExtrapolation, QuadraticExtrapolation
 from .hold import ZeroOrderHold, ZeroOrderHoldJacobi
+from .implicit import InterfaceJacobianImplicit, InterfaceJacobianSecant
 from .jacobian import InterfaceJacobian, InterfaceJacobianDrift
 
 SCHEMES: dict[str, type[Scheme]] = {cls.name: cls for cls in (
-    InterfaceJacobianDrift, InterfaceJacobian, ZeroOrderHold, ZeroOrderHoldJacobi, LinearExtrapolation,
+    InterfaceJacobianDrift, InterfaceJacobian, InterfaceJacobianSecant, InterfaceJacobianImplicit,
+    ZeroOrderHold, ZeroOrderHoldJacobi, LinearExtrapolation,
     QuadraticExtrapolation)}
-DEFAULT_SCHEME = InterfaceJacobianDrift.name
+DEFAULT_SCHEME = InterfaceJacobianImplicit.name
 
 
 def make_scheme(name: str) -> Scheme:
@@ -59,5 +69,6 @@ def make_scheme(name: str) -> Scheme:
 
 
 __all__ = ["DEFAULT_SCHEME", "SCHEMES", "Exchanged", "ForceModel", "InterfaceJacobian", "InterfaceJacobianDrift",
+           "InterfaceJacobianImplicit", "InterfaceJacobianSecant",
            "LinearExtrapolation", "QuadraticExtrapolation", "Scheme", "ZeroOrderHold", "ZeroOrderHoldJacobi",
            "make_scheme"]

@@ -91,6 +91,11 @@ class Scheme:
     ordering = "gauss-seidel"
     uses_tangent = False
     history = 1
+    #: ring speeds the master sends the component: "end" (end-of-step values) or "secant"
+    #: ((theta(t_n + h) - theta(t_n)) / h, so that the component's cage angle is exact; implicit.py)
+    ring_speeds = "end"
+    #: True: the master repeats each step with rollback until ``converged`` (``set_trial`` gets the last pass)
+    iterative = False
 
     def __init__(self):
         self.past: deque[Exchanged] = deque(maxlen=self.history)

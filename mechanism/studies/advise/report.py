@@ -172,9 +172,11 @@ def plot(advice: Advice, path: Path) -> Path:
         lim = search.limit("stable")
         if lim["fails_at"]:
             ax.axvline(lim["fails_at"], color=color, ls=":", lw=1)
-        walls = [(h, r.get("cpu_time") or r["wall_time"]) for h, r in pts if r.get("wall_time")]
-        if walls:
-            bx.loglog(*zip(*walls), "o", color=color, ms=4, label=s)
+        for stable, marker in ((True, "o"), (False, "x")):
+            walls = [(h, r.get("cpu_time") or r["wall_time"]) for h, r in pts
+                     if r.get("wall_time") and bool(r.get("stable")) == stable]
+            if walls:
+                bx.loglog(*zip(*walls), marker, color=color, ms=4 if stable else 6, label=s if stable else None)
     ax.axhline(advice.config.tolerance, color="k", ls="-.", lw=0.8)
     ax.set_xlabel("communication step h [s]")
     ax.set_ylabel(f"relative error of {merit_label(advice)} [1]")
@@ -183,7 +185,9 @@ def plot(advice: Advice, path: Path) -> Path:
     ax.legend(fontsize=8)
     bx.set_xlabel("communication step h [s]")
     bx.set_ylabel("CPU time of the run [s]")
-    bx.set_title(f"cost ({advice.executor}, shared machine)", fontsize=9)
+    bx.set_title(f"cost per run (o: stable, ×: unstable, stopped early or ran to the end)", fontsize=9)
+    if bx.get_legend_handles_labels()[0]:
+        bx.legend(fontsize=8)
     bx.grid(True, which="both", alpha=0.3)
     fig.suptitle(f"Step-size advice: {operating_point(advice)}, tolerance {100 * advice.config.tolerance:g} %",
                  fontsize=11)

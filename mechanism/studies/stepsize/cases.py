@@ -50,12 +50,14 @@ COLUMNS: list[tuple[str, str]] = [
     ("max_ball_load_ref", "N"), ("max_ball_load", "N"), ("max_ball_load_err_rel", "1"),
     ("peak_error_rel", "1"),
     ("ref_floor_force_max_rel", "1"), ("ref_floor_ecc_max_rel", "1"),
+    ("energy_residual", "J"), ("damping_dissipation", "J"), ("energy_residual_rel", "1"), ("ref_energy_residual_rel", "1"),
     ("pid", ""), ("host", ""), ("worker", ""), ("started_at", "s"), ("ended_at", "s"),
 ]
 COLUMN_NAMES = [c for c, _ in COLUMNS]
 #: columns that depend on where and when a case ran, not on what it computed
 PLACEMENT_COLUMNS = ("wall_time", "pid", "host", "worker", "started_at", "ended_at")
-REFERENCE_COLUMNS = ("time", "e_x", "e_y", "F_x", "F_y", "slider_a", "crank_moment", "max_ball_load")
+REFERENCE_COLUMNS = ("time", "e_x", "e_y", "F_x", "F_y", "slider_a", "crank_moment", "max_ball_load",
+                     "energy_residual", "damping_dissipation")
 ORDER_METRIC = "err_force_max_rel"
 PEAK_METRIC = "peak_error_rel"
 
@@ -106,7 +108,7 @@ class StudyConfig:
     rpms: list[float] = field(default_factory=lambda: [1200.0])
     balls: list[int | None] = field(default_factory=lambda: [None])
     settings: list[dict] = field(default_factory=lambda: [{}])
-    schemes: list[str] = field(default_factory=lambda: ["jacobian-drift", "jacobian", "extrap1", "zoh"])
+    schemes: list[str] = field(default_factory=lambda: ["jacobian-implicit", "jacobian-drift", "jacobian", "extrap1", "zoh"])
     steps: list[float] = field(default_factory=lambda: parse_grid(DEFAULT_STEPS))
     tols: list[float] = field(default_factory=lambda: parse_grid(DEFAULT_TOLS))
     revs: float = 2.0

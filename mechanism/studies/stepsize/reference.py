@@ -122,6 +122,16 @@ def compare(result_columns: dict, ref: dict, case: dict) -> dict:
         ref_peak = float(np.max(np.asarray(ref["max_ball_load"], dtype=float)[ri]))
         out["max_ball_load"], out["max_ball_load_ref"] = run_peak, ref_peak
         out["max_ball_load_err_rel"] = run_peak / ref_peak - 1.0 if ref_peak > 0 else None
+    # the coupling energy error (mechanism.cosim.energy): the run's energy residual at its end (the whole
+    # run, start-up included), relative to the energy its damping dissipated; the reference's is the floor
+    for prefix, source in (("", result_columns), ("ref_", ref)):
+        if "energy_residual" in source and "damping_dissipation" in source and len(source["energy_residual"]):
+            last = -1 if prefix == "" else min(int(idx[sel][-1]), len(source["energy_residual"]) - 1)
+            res = float(np.asarray(source["energy_residual"], dtype=float)[last])
+            dis = float(np.asarray(source["damping_dissipation"], dtype=float)[last])
+            if prefix == "":
+                out["energy_residual"], out["damping_dissipation"] = res, dis
+            out[f"{prefix}energy_residual_rel"] = res / dis if dis > 0 else None
     pe = [abs(out[k]) for k in ("peak_force_err_rel", "max_ecc_err_rel") if out.get(k) is not None]
     out["peak_error_rel"] = max(pe) if pe else None
     out = {k: _clean(v) for k, v in out.items()}

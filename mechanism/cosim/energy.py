@@ -1,0 +1,97 @@
+"""The energy account of a run: where the mechanism's energy went, and what the coupling created.
+
+Along the mechanism's trajectory (whatever force it felt), the bearing's force law
+(``fmu_bearing.ball_bearing.BallBearing``, the one home of eq. 18-19) says:
+
+* contact potential energy   V = sum_r (2/5) K delta_r^(5/2)  (the integral of F . d delta of the
+  Hertz law, ``BallBearing.elastic_energy``);
+* damping dissipation        D = int (F - F_el) . v dt >= 0, where F is the law's force and F_el the
+  same law at v = 0 (the elastic part, clamped contacts included: a ball whose damping would pull
+  carries 0 N, its elastic power is dissipated);
+* cage work                  W_cage = int omega_m (F_el x e)_z dt: the cage (eq. 16) carries the loaded
+  balls round under a fixed e, changing V at fixed e; the model's frictionless balls take this
+  energy from, or give it to, the kinematic cage (dV/dt = F_el . v + omega_m (F_el x e)_z);
+* work of the driving moment W_drive = int lambda . Phi_t dt (the power of the rheonomic constraints,
+  here the crank driver: M omega), plus the work of the applied forces W_applied = int Q^A . q' dt.
+
+The mechanism's energy balance, exact for the monolithic model, is then
+
+    T + V + D - W_drive - W_applied - W_cage = T_0 + V_0,
+
+and its **residual** R = T + V + D - W_drive - W_applied - W_cage - T_0 - V_0 is the energy the coupling
+created (R > 0) or destroyed (R < 0), up to the quadrature error of the integrals (trapezoidal
+rule of the 2-step Adams-Moulton method over the samples, i.e. at the output interval; the
+trapezoidal rule where the spacing changes) and the mechanism integrator's own error.
+The monolithic reference's R measures that floor (tests/test_energy.py).
+
+The cage angle used is the kinematic one, cage_0 + omega_m(Delta theta_journal, Delta theta_housing)
+(eq. 16 is linear in the ring speeds, so its time integral is the same combination of the ring
+angles): the law's truth along the trajectory, independent of how the component integrated it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fmu_bearing.ball_bearing import BallBearing
+from mechanism.cosim.joint import BearingLink
+from mechanism.multibody.solver import System
+
+#: CSV columns of the account [J], in order
+ENERGY_COLUMNS = ("contact_energy", "damping_dissipation", "drive_work", "cage_work", "applied_work",
+                  "energy_residual")
+
+
+@dataclass
+class EnergyAccount:
+    """Running energy account, updated at every sample (``update``) with the trapezoidal rule."""
+
+    system: System
+    link: BearingLink
+    bearing: BallBearing
+    _last: tuple | None = field(default=None, init=False)
+    _before: tuple | None = field(default=None, init=False)
+    _sums: list = field(default_factory=lambda: [0.0, 0.0, 0.0, 0.0], init=False)   # D, W_drive, W_cage, W_app
+    _start: float = field(default=0.0, init=False)
+    _angles0: tuple = field(default=(0.0, 0.0), init=False)
+
+    def cage_angle(self, q: np.ndarray) -> float:
+        """The kinematic cage angle [rad]: cage_0 plus eq. (16) applied to the ring angles' changes."""
+        aj, ai = self.link.ring_angles(q)
+        return float(self.bearing.params.cage_angle_start
+                     + self.bearing.cage_velocity(aj - self._angles0[0], ai - self._angles0[1]))
+
+    def update(self, t: float, q: np.ndarray, qd: np.ndarray, lam: np.ndarray) -> dict[str, float]:
+        """Account up to time t [s] for the state (q, qd) and the multipliers lam of eq. (9) (model order)."""
+        if self._last is None:
+            self._angles0 = self.link.ring_angles(q)
+        ex, ey, vx, vy, wi, wo = self.link.inputs(q, qd)
+        cage = self.cage_angle(q)
+        law = self.bearing.evaluate(ex, ey, vx, vy, cage, wi, wo)
+        elastic = self.bearing.evaluate(ex, ey, 0.0, 0.0, cage, wi, wo)
+        system = self.system
+        powers = ((law.F_x - elastic.F_x) * vx + (law.F_y - elastic.F_y) * vy,                 # damping
+                  float(np.dot(lam, system.phi_t(t))) if system.m else 0.0,                   # drivers
+                  self.bearing.cage_velocity(wi, wo) * (elastic.F_x * ey - elastic.F_y * ex),  # cage
+                  float(np.dot(system.applied_forces(q, qd, t), qd)))                          # applied
+        kinetic = system.kinetic_energy(qd)
+        potential = self.bearing.elastic_energy(ex, ey, cage)
+        if self._last is None:
+            self._start = kinetic + potential
+        else:
+            t1, p1 = self._last
+            dt = t - t1
+            if self._before is not None and abs((t1 - self._before[0]) - dt) <= 1e-9 * dt:
+                p0 = self._before[1]             # equal spacing: the 2-step Adams-Moulton rule, O(dt^3)
+                for k in range(4):
+                    self._sums[k] += dt / 12.0 * (5.0 * powers[k] + 8.0 * p1[k] - p0[k])
+            else:                                # first interval or a change of spacing: trapezoidal rule
+                for k in range(4):
+                    self._sums[k] += 0.5 * dt * (p1[k] + powers[k])
+        self._before, self._last = self._last, (t, powers)
+        dissipated, drive, cage_work, applied = self._sums
+        return {"contact_energy": potential, "damping_dissipation": dissipated, "drive_work": drive,
+                "cage_work": cage_work, "applied_work": applied,
+                "energy_residual": kinetic + potential + dissipated - drive - applied - cage_work - self._start}
+
