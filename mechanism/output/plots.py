@@ -216,7 +216,7 @@ def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None) -> list[Pa
             ax.plot(x, r[col] * 1e3, lw=0.8, label=label)
         ax.set_xlabel("crank angle [π rad]")
         ax.set_ylabel("energy [mJ]")
-        ax.set_title(f"Energy account: T + V + D - W_drive - W_cage - E_0 = residual ({title})")
+        ax.set_title(f"Energy account: T + V + D - W_drive - W_cage - E_0 = residual\n({title})", fontsize=10)
         ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
         paths.append(_save(fig, out / "energy.png"))
