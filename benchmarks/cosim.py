@@ -14,7 +14,7 @@ Prints, measured in one run (this machine is shared: compare the ratios, and run
 
 Each loop figure is the median of ``--repeat`` runs, interleaved so that load changes hit them alike.
 
-    python benchmarks/cosim.py [--revs 2] [--rpm 1200] [--step 1e-5] [--repeat 3] [--cold]
+    python benchmarks/cosim.py [--revs 2] [--rpm 1200] [--step 1e-5] [--repeat 3] [--cold] [--scheme NAME]
 
 Runs against whatever ``mechanism`` is on the path (PYTHONPATH=<checkout> for a before/after pair;
 ``--cold`` needs the compiled master).
@@ -97,8 +97,10 @@ def main() -> None:
     p.add_argument("--step", type=float, default=1e-5)
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--cold", action="store_true", help="also time a first run in a fresh numba cache")
+    p.add_argument("--scheme", default=None, help="coupling scheme of the loops (default: the run's default)")
     a = p.parse_args()
-    base = RunConfig(rpm=a.rpm, revs=a.revs, step=a.step, output_interval=a.step, progress=False)
+    base = RunConfig(rpm=a.rpm, revs=a.revs, step=a.step, output_interval=a.step, progress=False,
+                     **({"scheme": a.scheme} if a.scheme else {}))
     fmu = run_module.fmu_path(base)   # build the FMU before timing
     configs = {"cosim": base, "inprocess": RunConfig(**{**base.__dict__, "mode": "inprocess"}),
                "ideal": RunConfig(**{**base.__dict__, "joint": "ideal"})}

@@ -11,11 +11,28 @@ from typing import TYPE_CHECKING
 
 from mechanism.cosim.coupling import DEFAULT_SCHEME, SCHEMES
 from mechanism.cosim.joint import CONTACT_POINTS
-from mechanism.cosim.monolithic import METHODS
 from mechanism.run import parse_setting
 
 if TYPE_CHECKING:
     from mechanism.run import RunConfig
+
+
+class _MonolithicMethods:
+    """``mechanism.cosim.monolithic.METHODS`` as argparse choices, imported only when asked (scipy's import
+    costs a second; a run that is not monolithic does not need it)."""
+
+    def _names(self) -> tuple[str, ...]:
+        from mechanism.cosim.monolithic import METHODS
+        return tuple(METHODS)
+
+    def __contains__(self, name) -> bool:
+        return name in self._names()
+
+    def __iter__(self):
+        return iter(self._names())
+
+
+METHODS = _MonolithicMethods()
 
 
 def add_run_arguments(p: argparse.ArgumentParser) -> None:
@@ -40,7 +57,8 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                    help="apply the bearing force at the ring centres (default) or at eq. 15's contact points")
     p.add_argument("--gravity", action="store_true", help="add gravity (-9.81 m/s² along y)")
     p.add_argument("--fmu", default=None, help="component FMU (default dist/<Name>.fmu, built on first use)")
-    p.add_argument("--method", choices=tuple(METHODS), default="LSODA", help="monolithic integrator")
+    p.add_argument("--method", choices=METHODS, default="LSODA", metavar="METHOD",
+                   help="monolithic integrator: scipy.integrate's Radau, BDF or LSODA (default LSODA)")
     p.add_argument("--rtol", type=float, default=1e-9, help="monolithic relative tolerance")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 

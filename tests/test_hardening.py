@@ -134,18 +134,24 @@ def test_a_failed_write_keeps_the_old_file_and_leaves_no_partial_file(tmp_path, 
     old = (tmp_path / "timeseries.csv").read_bytes()
 
     import mechanism.output.results as results
-    real_writer = csv.writer
 
-    def full_disk_writer(f):
-        w = real_writer(f)
+    class FullDisk:
+        """A file whose write fails once the row for time 3 comes (the disk fills mid-file)."""
 
-        class Writer:
-            def writerow(self, row):
-                if row and row[0] == f"{3:.10g}":
-                    raise OSError(28, "No space left on device", str(f.name))
-                return w.writerow(row)
-        return Writer()
-    monkeypatch.setattr(results.csv, "writer", full_disk_writer)
+        def __init__(self, f):
+            self.f = f
+
+        def write(self, text):
+            if "\n3," in text or text.startswith("3,"):
+                raise OSError(28, "No space left on device", str(self.f.name))
+            return self.f.write(text)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return self.f.__exit__(*exc)
+    monkeypatch.setattr(results, "open", lambda *a, **k: FullDisk(open(*a, **k)), raising=False)
     with pytest.raises(OSError, match="No space"):
         write_outputs(result, tmp_path, plots=False)
     assert (tmp_path / "timeseries.csv").read_bytes() == old
@@ -198,7 +204,8 @@ def test_concurrent_runs_never_mix_rows(tmp_path):
 def test_sigint_leaves_a_consistent_partial_result(tmp_path, ball_bearing_fmu):
     out = tmp_path / "r"
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    proc = subprocess.Popen([sys.executable, "-m", "mechanism", "run", "--revs", "2", "--quiet", "--no-plots",
+    # 20 revolutions: the run is still going 2 s after the lock however fast the master is
+    proc = subprocess.Popen([sys.executable, "-m", "mechanism", "run", "--revs", "20", "--quiet", "--no-plots",
                              "--fmu", str(ball_bearing_fmu), "--out", str(out)], cwd=ROOT, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120

@@ -49,3 +49,19 @@ def test_windows_for_short_runs_use_the_second_half():
     x = np.linspace(0, 1.0, 101)   # half a revolution, in π rad
     start, steady, name = plots.windows(x)
     assert name == "second half of the run" and steady.sum() == 51 and start[0] and not start[-1]
+
+
+def test_envelope_keeps_every_peak_in_order_with_few_points():
+    """The min/max envelope draws a long curve with about MAX_POINTS points and keeps its extremes (so the axes
+    autoscale as with every sample), the first and the last sample, in time order."""
+    rng = np.random.default_rng(3)
+    for n in (50, 4001, 100_001):
+        y, x = rng.normal(size=n), rng.normal(size=n)
+        y[n // 3], x[n // 2] = 40.0, -30.0
+        for curves in ((y,), (x, y)):
+            k = plots.envelope(*curves)
+            assert len(k) <= max(n, 1) and len(k) <= plots.MAX_POINTS + 20
+            assert k[0] == 0 and k[-1] == n - 1 and np.all(np.diff(k) > 0)
+            for c in curves:
+                assert c[k].max() == c.max() and c[k].min() == c.min()
+    assert len(plots.envelope(np.arange(10.0))) == 10

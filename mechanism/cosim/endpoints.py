@@ -314,19 +314,41 @@ class FmuEndpoint(_FmuBase):
         nc = len(self.coupling_names)
         self._vr_out = (ctypes.c_uint * nc)(*(self.variables[n].valueReference for n in self.coupling_names))
         self._val_out = (ctypes.c_double * nc)()
-        self._real_samples = [n for n in self.sample_names if self.variables[n].type == "Real"]
-        self._int_samples = [n for n in self.sample_names if self.variables[n].type == "Integer"]
-        self._bool_samples = [n for n in self.sample_names if self.variables[n].type == "Boolean"]
+        # per-ball outputs beyond the balls present (the FMU's capacity) are always zero: not sampled
+        # (the in-process and FMI 3.0 endpoints sample ball_load_1 .. ball_load_n as well)
+        present = {f"ball_load_{k + 1}" for k in range(self.n_balls)}
+        names = [n for n in self.sample_names if not n.startswith("ball_load_") or n in present]
+        self._real_samples = [n for n in names if self.variables[n].type == "Real"]
+        self._int_samples = [n for n in names if self.variables[n].type == "Integer"]
+        self._bool_samples = [n for n in names if self.variables[n].type == "Boolean"]
         self.sample_names = tuple(self._real_samples + self._int_samples + self._bool_samples)
-        self._vr_sr = (ctypes.c_uint * len(self._real_samples))(*(self.variables[n].valueReference
+        # a sampled step fetches the coupling outputs and the real samples in one fmi2GetReal
+        # (exchange_sampled); _val_out and _val_sr are views into the one buffer
+        nr = len(self._real_samples)
+        self._vr_all = (ctypes.c_uint * (nc + nr))(*self._vr_out, *(self.variables[n].valueReference
                                                                     for n in self._real_samples))
-        self._val_sr = (ctypes.c_double * len(self._real_samples))()
+        self._val_all = (ctypes.c_double * (nc + nr))()
+        self._val_out = (ctypes.c_double * nc).from_buffer(self._val_all)
+        self._val_sr = (ctypes.c_double * nr).from_buffer(self._val_all, nc * ctypes.sizeof(ctypes.c_double))
+        self._vr_sr = (ctypes.c_uint * nr)(*self._vr_all[nc:])
         self._vr_si = (ctypes.c_uint * len(self._int_samples))(*(self.variables[n].valueReference
                                                                    for n in self._int_samples))
         self._val_si = (ctypes.c_int * len(self._int_samples))()
         self._vr_sb = (ctypes.c_uint * len(self._bool_samples))(*(self.variables[n].valueReference
                                                                    for n in self._bool_samples))
         self._val_sb = (ctypes.c_int * len(self._bool_samples))()
+        # the hot path calls the FMU's C functions directly (fmpy's per-call wrapper only adds Python
+        # overhead when no call logger is set) and checks the status itself (> fmi2Warning is an error)
+        functions = self.fmu._functions
+        self._c_set, self._c_step, self._c_get, self._c_get_int, self._c_get_bool = (
+            functions[f] for f in ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal", "fmi2GetInteger", "fmi2GetBoolean"))
+        self._sampled = False     # _val_sr holds this step's real samples (exchange_sampled)
+        nr, ni = len(self._val_sr), len(self._val_si)
+        self._views = (np.ctypeslib.as_array(self._val_sr) if nr else None,     # for sample_into
+                       np.ctypeslib.as_array(self._val_si) if ni else None,
+                       np.ctypeslib.as_array(self._val_sb) if len(self._val_sb) else None, nr, nr + ni)
+        self._pad = (0.0,) * (8 - nc) if nc < 8 else ()
+        self._slice_out = slice(0, nc)
 
     def initialize(self, inputs: Sequence[float]) -> tuple[float, ...]:
         """Instantiate, apply start values and start inputs, initialise; return the coupling outputs at t0."""
@@ -356,26 +378,65 @@ class FmuEndpoint(_FmuBase):
         val[0], val[1], val[2], val[3], val[4], val[5] = inputs
         self.fmu.fmi2SetReal(self.fmu.component, self._vr_in, 6, val)
 
-    def exchange(self, t: float, h: float, inputs: Sequence[float]) -> tuple[float, ...]:
-        fmu = self.fmu
-        try:
-            self._set_inputs(inputs)
-            fmu.fmi2DoStep(fmu.component, t, h, 1)
-            fmu.fmi2GetReal(fmu.component, self._vr_out, len(self._vr_out), self._val_out)
-        except Exception as err:
-            raise self._fail(f"doStep at t = {t:.9g} s", err) from None
+    def _step(self, t: float, h: float, inputs: Sequence[float], vrs, values) -> None:
+        """Set the inputs, doStep over [t, t + h], get ``values`` of ``vrs`` (the C functions, status checked)."""
+        val, c = self._val_in, self.fmu.component
+        val[0], val[1], val[2], val[3], val[4], val[5] = inputs
+        self._sampled = False
+        status = self._c_set(c, self._vr_in, 6, val)
+        if status <= 1:
+            status = self._c_step(c, t, h, 1)
+            if status <= 1:
+                status = self._c_get(c, vrs, len(vrs), values)
+        if status > 1:
+            raise self._fail(f"doStep at t = {t:.9g} s", ExchangeError(f"status {_STATUS[min(status, 5)]}"))
         self.calls += 1
-        return self._coupling()
+
+    def exchange(self, t: float, h: float, inputs: Sequence[float]) -> tuple[float, ...]:
+        self._step(t, h, inputs, self._vr_out, self._val_out)
+        return (*self._val_out, *self._pad)
+
+    def exchange_sampled(self, t: float, h: float, inputs: Sequence[float]) -> tuple[float, ...]:
+        """``exchange``, fetching the real samples of the end of the step in the same fmi2GetReal (the
+        next ``sample`` uses them)."""
+        self._step(t, h, inputs, self._vr_all, self._val_all)
+        self._sampled = True
+        return (*self._val_out, *self._pad)
+
+    def set_state(self, state) -> None:
+        self._sampled = False
+        super().set_state(state)
 
     def sample(self) -> list[float]:
-        fmu = self.fmu
-        if self._real_samples:
-            fmu.fmi2GetReal(fmu.component, self._vr_sr, len(self._vr_sr), self._val_sr)
-        if self._int_samples:
-            fmu.fmi2GetInteger(fmu.component, self._vr_si, len(self._vr_si), self._val_si)
-        if self._bool_samples:
-            fmu.fmi2GetBoolean(fmu.component, self._vr_sb, len(self._vr_sb), self._val_sb)
-        return list(self._val_sr) + [float(x) for x in self._val_si] + [float(bool(x)) for x in self._val_sb]
+        """The non-coupling outputs at the end of the last step, as floats in the order of ``sample_names``."""
+        self.sample_values()
+        return [*self._val_sr, *map(float, self._val_si), *(float(bool(x)) for x in self._val_sb)]
+
+    def sample_values(self) -> None:
+        """Fetch the non-coupling outputs into the ctypes buffers (reals already there after
+        ``exchange_sampled``)."""
+        c, status = self.fmu.component, 0
+        if self._real_samples and not self._sampled:
+            status = self._c_get(c, self._vr_sr, len(self._vr_sr), self._val_sr)
+        self._sampled = False
+        if self._int_samples and status <= 1:
+            status = self._c_get_int(c, self._vr_si, len(self._vr_si), self._val_si)
+        if self._bool_samples and status <= 1:
+            status = self._c_get_bool(c, self._vr_sb, len(self._vr_sb), self._val_sb)
+        if status > 1:
+            raise self._fail("sampling the outputs", ExchangeError(f"status {_STATUS[min(status, 5)]}"))
+
+    def sample_into(self, out: np.ndarray) -> None:
+        """``out[:] = sample()`` without the list: the values copied from the ctypes buffers through numpy
+        views (the master's recorded row; columns in the order of ``sample_names``)."""
+        self.sample_values()
+        real, integer, boolean, nr, ni = self._views
+        if real is not None:
+            out[:nr] = real
+        if integer is not None:
+            out[nr:ni] = integer
+        if boolean is not None:
+            out[ni:] = boolean != 0
 
 
 class Fmu3Endpoint(_FmuBase):

@@ -121,6 +121,9 @@ class CouplingLoop:
         self.energy = energy
         self.link, self.endpoint, self.reaction_force = link, endpoint, reaction_force
         self.sample_names = list(endpoint.sample_names) if endpoint is not None else []
+        # a step whose end is sampled may fetch the samples with the coupling outputs (FmuEndpoint)
+        self._exchange_sampled = (getattr(endpoint, "exchange_sampled", None) or endpoint.exchange
+                                  if endpoint is not None and self.sample_names else None)
         self.columns = list(BASE_COLUMNS) + [c for c in self.sample_names if c not in BASE_COLUMNS]
         if energy is not None:
             self.columns += list(ENERGY_COLUMNS)
@@ -132,6 +135,9 @@ class CouplingLoop:
         self.substeps_max = 1
         self.substeps_total = 0
         self.iterations = {"steps": 0, "passes": 0, "max_passes": 0, "not_converged": 0}
+        #: ring speeds sent with the last exchange when they differ from the end-of-step ones (secant
+        #: schemes): the samples' omega_inner/omega_outer columns record these, the component's inputs
+        self.sent_ring_speeds = None
         n, scheme, applied = self.n, self.scheme, system.applied_forces
 
         def rhs(tau, y):
@@ -182,6 +188,9 @@ class CouplingLoop:
         if len(self._sample_cols) and np.array_equal(np.diff(self._sample_cols), np.ones(len(self._sample_cols) - 1)):
             self._sample_cols = slice(int(self._sample_cols[0]), int(self._sample_cols[-1]) + 1)   # a faster write
         self._no_row = np.zeros(0)
+        # an endpoint that copies its samples into the row (FmuEndpoint) when they are contiguous columns
+        into = getattr(self.endpoint, "sample_into", None)
+        self._sample_into = into if isinstance(self._sample_cols, slice) else None
         probe = getattr(self.reaction_force, "probe", None)   # (joint rows start, stop, x column, y column)
         self._react = np.array(probe if probe is not None and self.link is None else (), np.int64)
 
@@ -203,6 +212,8 @@ class CouplingLoop:
         if self.link is None:
             if not len(self._react):
                 row[rec.index["F_x"]], row[rec.index["F_y"]] = self.reaction_force(y[:n], self._lam)
+        elif self._sample_into is not None:
+            self._sample_into(row[self._sample_cols])
         elif self.sample_names:
             row[self._sample_cols] = self.endpoint.sample()
         if not self._observe_in_kernel:
@@ -211,6 +222,8 @@ class CouplingLoop:
         if self.energy is not None and self.link is not None:
             for name, value in self.energy.update(t, y[:n], y[n:], self._lam).items():
                 row[rec.index[name]] = value
+        if self.sent_ring_speeds is not None:     # the ring speeds the component was given (secant schemes)
+            row[rec.index["omega_inner"]], row[rec.index["omega_outer"]] = self.sent_ring_speeds
 
     def _k1_valid(self, y: np.ndarray, t0: float, fm: np.ndarray) -> bool:
         """True if the stored end-of-step evaluation is this step's first RK4 stage (same state, time
@@ -257,7 +270,8 @@ class CouplingLoop:
         settings, scheme, endpoint, system = self.settings, self.scheme, self.endpoint, self.system
         fm = None
         if endpoint is not None:
-            pending = endpoint.exchange(t0, h, self.inputs) if scheme.ordering == "jacobi" else None
+            exchange = endpoint.exchange if rec is None or self._exchange_sampled is None else self._exchange_sampled
+            pending = exchange(t0, h, self.inputs) if scheme.ordering == "jacobi" else None
             scheme.begin_step(t0, h)
             m = substeps(h, scheme.past[-1], self.mobility, settings.substep_limit,
                          settings.max_substeps) if scheme.uses_tangent else 1
@@ -301,7 +315,8 @@ class CouplingLoop:
                 out, used = pending, self.inputs
             else:
                 sent = u if scheme.ring_speeds == "end" else self.link.secant_ring_speeds(u, y_start[:n], y[:n], h)
-                out, used = endpoint.exchange(t0, h, sent), u
+                self.sent_ring_speeds = sent[4:] if sent is not u else None
+                out, used = exchange(t0, h, sent), u
             if not math.isfinite(sum(out)):
                 raise RunFailure(step, t, f"the bearing returned a non-finite force {out[:2]}")
             scheme.push(Exchanged(t, *used[:4], *out))
@@ -384,6 +399,8 @@ class CouplingLoop:
         row["kinetic_energy"] = system.kinetic_energy(qd)
         if self.energy is not None:
             row.update(self.energy.update(t, q, qd, lam))
+        if self.sent_ring_speeds is not None:     # the ring speeds the component was given (secant schemes)
+            row["omega_inner"], row["omega_outer"] = self.sent_ring_speeds
         return row
 
     def snapshot(self):
@@ -433,6 +450,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     from tqdm import tqdm  # here, not at the top: SliderCrank.fmu packs this module and needs no tqdm at runtime
     bar = tqdm(total=n_steps, desc=settings.description, unit="step", disable=not settings.progress,
                mininterval=0.5, leave=False)
+    poll = getattr(observe, "poll", None) if loop.kernels and loop._observe_in_kernel else None
     try:
         loop.start(y)
         loop.record(rec, 0.0, y)
@@ -442,6 +460,8 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
             y = loop.communicate(y, t0, h, step, t, rec if step % every == 0 else None)
             if step % 500 == 0:
                 bar.update(500)
+                if poll is not None:   # e.g. a signal noted by the driver (mechanism.run), when observe is compiled
+                    poll(t)
     except RunFailure as err:
         info["failure"] = {"step": err.step, "time_s": err.time, "cause": err.cause}
         return finish(rec, info, "failed", str(err), endpoint, bar, loop)

@@ -105,8 +105,10 @@ def resample(result: RunResult, times: np.ndarray) -> RunResult:
     t = result["time"]
     times = np.asarray(times, float)
     times = times[times <= t[-1] * (1 + 1e-12)]
-    data = np.column_stack([times] + [CubicSpline(t, result.data[:, k])(times) if np.all(np.isfinite(result.data[:, k]))
-                                      else np.interp(times, t, result.data[:, k])
-                                      for k in range(1, len(result.columns))])
+    data = np.empty((len(times), len(result.columns)))    # filled column by column: no second copy
+    data[:, 0] = times
+    for k in range(1, len(result.columns)):
+        column = result.data[:, k]
+        data[:, k] = CubicSpline(t, column)(times) if np.all(np.isfinite(column)) else np.interp(times, t, column)
     meta = dict(result.meta, resampled_from_s=float(t[1] - t[0]) if len(t) > 1 else 0.0)
     return RunResult(result.columns, data, meta, result.status, result.message)

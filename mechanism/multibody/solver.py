@@ -39,7 +39,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import lapack
 
 from mechanism.multibody.model import (
     GROUND,
@@ -57,6 +56,18 @@ DEFAULT_ALPHA = 100.0
 DEFAULT_BETA = 100.0
 """Default Baumgarte stiffness parameter beta [1/s] (see :class:`System`)."""
 
+
+
+def _dposv():
+    """LAPACK's dposv (Cholesky solve), imported on first use: scipy's import is not paid by the compiled path."""
+    global _DPOSV
+    if _DPOSV is None:
+        from scipy.linalg import lapack
+        _DPOSV = lapack.dposv
+    return _DPOSV
+
+
+_DPOSV = None
 
 class System:
     """Equations of motion of a planar multibody model (eq. 3-9).
@@ -313,7 +324,7 @@ class System:
         JM = J * minv
         phid = J @ qd + self._phit_i                                   # Phi_dot, eq. (4)
         rhs = JM @ Q - self._gam_i + self._2alpha * phid + self._beta2 * self._phi_i
-        _, lam, info = lapack.dposv(JM @ J.T, rhs)
+        _, lam, info = _dposv()(JM @ J.T, rhs)
         if info != 0:                                                  # redundant constraints
             lam = np.linalg.lstsq(JM @ J.T, rhs, rcond=None)[0]
         qdd = minv * Q - JM.T @ lam

@@ -107,14 +107,18 @@ def atomic_open(path: Path, mode: str = "w", **kwargs):
         raise
 
 
+#: rows formatted and written at a time by ``write_csv``
+CSV_CHUNK_ROWS = 2000
+
+
 def write_csv(r: RunResult, path: Path) -> None:
     """timeseries.csv: one header row 'name [unit]', then one row per sample (written atomically)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow([f"{c} [{unit_of(c)}]" for c in r.columns])
-        for row in r.data:
-            w.writerow([f"{x:.10g}" for x in row])
+        csv.writer(f).writerow([f"{c} [{unit_of(c)}]" for c in r.columns])
+        line = ",".join(["%.10g"] * len(r.columns)) + "\r\n"     # csv.writer's row format and line end
+        for k in range(0, len(r.data), CSV_CHUNK_ROWS):   # a chunk at a time: no list of the whole file
+            f.write("".join([line % row for row in map(tuple, r.data[k:k + CSV_CHUNK_ROWS].tolist())]))
 
 
 def write_json(data: dict, path: Path) -> None:

@@ -25,7 +25,8 @@ class LifeSection:
             if whole is None:                           # not a ball-bearing run
                 continue
             T = crank_period(r)
-            steady = run_life(r, (T, 2 * T)) if r["time"][-1] >= 2 * T - 1e-9 else None
+            half = 0.5 * float(r.meta.get("output_interval_s") or 0.0) + 1e-12   # the step count is rounded
+            steady = run_life(r, (T, 2 * T)) if r["time"][-1] >= 2 * T - half else None
             rows.append((name, r.meta["config"]["rpm"], n_balls_of(r), steady, whole))
         if not rows:
             return
