@@ -11,7 +11,7 @@ import numpy as np  # noqa: E402
 
 from mechanism.output.plots import crank_pi, plot_trajectory  # noqa: E402
 from mechanism.studies.reproduce.analysis import (ball_angles, ball_loads, eccentricity, error_pattern, half_clearance_of, n_balls_of, on_times, orbit_window, rev_mask, rms, window)  # noqa: E402
-from mechanism.studies.reproduce.drawing import (four_panels, increasing, save_figure, pi_axis, verdict_word)  # noqa: E402
+from mechanism.studies.reproduce.drawing import (increasing, save_figure, pi_axis, verdict_word)  # noqa: E402
 from mechanism.studies.reproduce.paper import (CLAIMS, PAPER)  # noqa: E402
 from mechanism.studies.reproduce.verdicts import ALIKE, CLOSE_TO_IDEAL, START_REVS, STARTUP, STEADY  # noqa: E402
 
@@ -148,15 +148,8 @@ class SpeedFigures:
     def fig14(self):
         if not self.has(*self.bearing, *self.ideal):
             return
-
-        def draw(ax, name):
-            r, i = self.runs[name], self.ideal_of(name)
-            ax.plot(crank_pi(i), i["slider_a"], "k", lw=1.2, label="ideal joint")
-            ax.plot(crank_pi(r), r["slider_a"], lw=0.7, label="ball bearing")
-            ax.legend(fontsize=7)
-            pi_axis(ax)
-        fname = four_panels(self.runs, self.bearing, draw, "Fig. 14: slider acceleration, ideal joint and ball bearing",
-                      self.fig_dir / "fig14_slider_acceleration.png", "slider acceleration [m/s²]")
+        fname = self.ideal_vs_bearing(self.bearing, "slider_a", "Fig. 14: slider acceleration, ideal joint and ball bearing",
+                                      "fig14_slider_acceleration.png", "slider acceleration [m/s²]")
         rel = [self.table[n]["rel_rms_da"] for n in self.bearing]
         self.w("### Fig. 14 — slider acceleration, ideal vs bearing")
         self.w()
@@ -269,15 +262,9 @@ class SpeedFigures:
             return
         names = []
         for col, fig_no in (("F_x", 17), ("F_y", 18)):
-            def draw(ax, name, col=col):
-                r, i = self.runs[name], self.ideal_of(name)
-                ax.plot(crank_pi(i), i[col], "k", lw=1.2, label="ideal joint")
-                ax.plot(crank_pi(r), r[col], lw=0.7, label="ball bearing")
-                ax.legend(fontsize=7)
-                pi_axis(ax)
-            names.append(four_panels(self.runs, self.bearing, draw,
-                               f"Fig. {fig_no}: joint force {col[-1].upper()} on the crank (housing)",
-                               self.fig_dir / f"fig{fig_no}_joint_force_{col[-1]}.png", f"joint force {col} [N]"))
+            names.append(self.ideal_vs_bearing(self.bearing, col,
+                                               f"Fig. {fig_no}: joint force {col[-1].upper()} on the crank (housing)",
+                                               f"fig{fig_no}_joint_force_{col[-1]}.png", f"joint force {col} [N]"))
         ratio = [self.table[b]["peak_F"] / self.table[i]["peak_F"] for b, i in zip(self.bearing, self.ideal)]
         self.w("### Fig. 17–18 — joint force in X and Y")
         self.w()
@@ -317,15 +304,8 @@ class SpeedFigures:
     def fig19(self):
         if not self.has(*self.bearing, *self.ideal):
             return
-
-        def draw(ax, name):
-            r, i = self.runs[name], self.ideal_of(name)
-            ax.plot(crank_pi(i), i["crank_moment"], "k", lw=1.2, label="ideal joint")
-            ax.plot(crank_pi(r), r["crank_moment"], lw=0.7, label="ball bearing")
-            ax.legend(fontsize=7)
-            pi_axis(ax)
-        fname = four_panels(self.runs, self.bearing, draw, "Fig. 19: crank moment for constant crank speed",
-                      self.fig_dir / "fig19_crank_moment.png", "crank moment [N·m]")
+        fname = self.ideal_vs_bearing(self.bearing, "crank_moment", "Fig. 19: crank moment for constant crank speed",
+                                      "fig19_crank_moment.png", "crank moment [N·m]")
         rng = [(self.table[n]["M_min"], self.table[n]["M_max"]) for n in self.bearing]
         self.w("### Fig. 19 — crank moment")
         self.w()

@@ -19,7 +19,9 @@ import matplotlib
 matplotlib.use("Agg")
 
 from mechanism.cosim.record import RunResult  # noqa: E402
+from mechanism.output.plots import crank_pi  # noqa: E402
 from mechanism.studies.reproduce.analysis import (figures_of)  # noqa: E402
+from mechanism.studies.reproduce.drawing import four_panels, pi_axis  # noqa: E402
 from mechanism.studies.reproduce.cases import (BALL_COUNTS, SPEEDS, STUDY_RPM, paper_stiffness)  # noqa: E402
 from mechanism.studies.reproduce.figures_design import (DesignFigures)  # noqa: E402
 from mechanism.studies.reproduce.figures_speed import (SpeedFigures)  # noqa: E402
@@ -54,6 +56,17 @@ class Report(SpeedFigures, DesignFigures, Sections, LifeSection):
     def ideal_of(self, name: str) -> RunResult | None:
         rpm = self.runs[name].meta["config"]["rpm"]
         return self.runs.get(f"ideal-{float(rpm):g}")
+
+    def ideal_vs_bearing(self, names: list[str], col: str, title: str, filename: str, ylabel: str,
+                         label: str = "ball bearing") -> str:
+        """Four panels (one run each): ``col`` of the ideal joint (black) and of the run, against the crank angle."""
+        def draw(ax, name):
+            r, i = self.runs[name], self.ideal_of(name)
+            ax.plot(crank_pi(i), i[col], "k", lw=1.2, label="ideal joint")
+            ax.plot(crank_pi(r), r[col], lw=0.7, label=label)
+            ax.legend(fontsize=7)
+            pi_axis(ax)
+        return four_panels(self.runs, names, draw, title, self.fig_dir / filename, ylabel)
 
     def w(self, text: str = "") -> None:
         self.lines.append(text)

@@ -13,7 +13,7 @@ from fmu_bearing.parameters import BearingParameters  # noqa: E402
 from mechanism.output.plots import crank_pi  # noqa: E402
 from mechanism.studies.reproduce.analysis import (ball_angles, ball_loads, n_balls_of, on_times, orbit_window, window)  # noqa: E402
 from mechanism.studies.reproduce.cases import (IDEAL_STEP)  # noqa: E402
-from mechanism.studies.reproduce.drawing import (fmt, four_panels, increasing, save_figure, pi_axis)  # noqa: E402
+from mechanism.studies.reproduce.drawing import (fmt, increasing, save_figure, pi_axis)  # noqa: E402
 from mechanism.studies.reproduce.paper import (PAPER)  # noqa: E402
 
 
@@ -129,16 +129,9 @@ class Sections:
             ax.legend(fontsize=6)
         fig.suptitle("Paper-units stiffness variant (K/1000, labelled paperK): the paper's magnitudes")
         fname = save_figure(fig, self.fig_dir / "paperK_magnitudes.png")
-
-        def fig14_paperK(ax, name):
-            rr, i = self.runs[name], self.ideal_of(name)
-            ax.plot(crank_pi(i), i["slider_a"], "k", lw=1.2, label="ideal joint")
-            ax.plot(crank_pi(rr), rr["slider_a"], lw=0.7, label="ball bearing, K/1000")
-            ax.legend(fontsize=7)
-            pi_axis(ax)
-        fname14 = four_panels(self.runs, self.paperK, fig14_paperK, "Slider acceleration with the paper-units stiffness "
-                        "(K/1000): cf. Fig. 14", self.fig_dir / "paperK_slider_acceleration.png",
-                        "slider acceleration [m/s²]")
+        fname14 = self.ideal_vs_bearing(self.paperK, "slider_a", "Slider acceleration with the paper-units stiffness "
+                                        "(K/1000): cf. Fig. 14", "paperK_slider_acceleration.png",
+                                        "slider acceleration [m/s²]", label="ball bearing, K/1000")
         w("| quantity | paper (converted) | SI stiffness (default) | K/1000 (paper units) |")
         w("|---|---|---|---|")
         si, pk = self.table, self.table
