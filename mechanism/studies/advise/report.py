@@ -185,7 +185,7 @@ def plot(advice: Advice, path: Path) -> Path:
     ax.legend(fontsize=8)
     bx.set_xlabel("communication step h [s]")
     bx.set_ylabel("CPU time of the run [s]")
-    bx.set_title(f"cost per run (o: stable, ×: unstable, stopped early or ran to the end)", fontsize=9)
+    bx.set_title("cost per run (o: stable, ×: unstable, stopped early or ran to the end)", fontsize=9)
     if bx.get_legend_handles_labels()[0]:
         bx.legend(fontsize=8)
     bx.grid(True, which="both", alpha=0.3)

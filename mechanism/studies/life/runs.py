@@ -12,15 +12,14 @@ Default step 1e-5 s; 2e-5 s at most (``cases.DEFAULT_STEP``, ``cases.MAX_STEP``:
 from __future__ import annotations
 
 import math
-import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict
 
 from fmu_bearing.parameters import from_values
 from mechanism.output.life import life_from_samples
 from mechanism.run import RunConfig, run
 from mechanism.studies.life.cases import NAN_FIGURES, Point, Settings
+from mechanism.studies.parallel import map_jobs, worker_count
 
 
 def run_point(point: Point, settings: Settings) -> dict:
@@ -55,18 +54,4 @@ def run_point(point: Point, settings: Settings) -> dict:
 
 def sweep(pts: list[Point], settings: Settings, workers: int | None = None, progress: bool = True) -> list[dict]:
     """Run every point (in parallel processes when workers > 1), with a tqdm bar; rows in the order of ``pts``."""
-    from tqdm import tqdm
-    workers = max(1, min(workers or os.cpu_count() or 1, len(pts)))
-    rows: list[dict | None] = [None] * len(pts)
-    with tqdm(total=len(pts), desc="life-study", unit="run", disable=not progress) as bar:
-        if workers == 1:
-            for k, p in enumerate(pts):
-                rows[k] = run_point(p, settings)
-                bar.update()
-        else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                futures = {pool.submit(run_point, p, settings): k for k, p in enumerate(pts)}
-                for f in as_completed(futures):
-                    rows[futures[f]] = f.result()
-                    bar.update()
-    return rows  # type: ignore[return-value]
+    return map_jobs(run_point, [(p, settings) for p in pts], worker_count(workers, len(pts)), "life-study", progress)

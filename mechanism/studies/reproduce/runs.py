@@ -1,16 +1,15 @@
 """Running the reproduction: every run of ``cases.run_specs`` in parallel processes, cached, then the report."""
 from __future__ import annotations
 
-import os
 import re
 import shutil
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, replace
 from pathlib import Path
 from mechanism.run import RunConfig
 from mechanism.studies.reproduce.cache import (cache_dir, code_version, config_key, ensure_fmus, is_cached, load_result, save_result)
 from mechanism.studies.reproduce.cases import (RunSpec, run_specs)
+from mechanism.studies.parallel import map_jobs, worker_count
 
 
 def _compute(name: str, config: RunConfig, path: str, key: str, version: str) -> dict:
@@ -33,8 +32,6 @@ def _cost(spec: RunSpec) -> float:
 def run_all(out: Path, specs: list[RunSpec], force: bool = False, workers: int | None = None,
             progress: bool = True) -> dict:
     """Run (or take from the cache) every spec; return {"results", "infos", "computed", "cached", ...}."""
-    from tqdm import tqdm
-
     out = Path(out)
     names = [s.name for s in specs]
     if len(set(names)) != len(names):
@@ -47,25 +44,10 @@ def run_all(out: Path, specs: list[RunSpec], force: bool = False, workers: int |
     jobs = [(s.name, replace(s.config, fmu=str(fmus[s.config.joint]) if s.config.joint in fmus else None,
                              progress=False), str(paths[s.name]), config_key(s.config, version), version)
             for s in todo]
-    n_workers = max(1, min(workers or os.cpu_count() or 1, len(jobs) or 1))
+    n_workers = worker_count(workers, len(jobs))
     t0 = time.perf_counter()
-    done = {}
-    if n_workers == 1:
-        with tqdm(total=len(jobs), desc="reproduce", unit="run", disable=not progress or not jobs) as bar:
-            for job in jobs:
-                bar.set_postfix_str(job[0])
-                done[job[0]] = _compute(*job)
-                bar.update(1)
-    else:
-        # the workers are started (forked) before the progress bar's monitor thread exists
-        with ProcessPoolExecutor(max_workers=n_workers) as pool:
-            futures = {pool.submit(_compute, *job): job[0] for job in jobs}
-            with tqdm(total=len(jobs), desc="reproduce", unit="run", disable=not progress) as bar:
-                for fut in as_completed(futures):
-                    info = fut.result()
-                    done[info["name"]] = info
-                    bar.set_postfix_str(info["name"])
-                    bar.update(1)
+    done = {info["name"]: info for info in map_jobs(_compute, jobs, n_workers, "reproduce", progress,
+                                                     names=[job[0] for job in jobs])}
     elapsed = time.perf_counter() - t0
     results, infos = {}, {}
     for s in specs:
