@@ -102,6 +102,26 @@ def test_cli_errors_are_one_line_before_any_simulation(tmp_path, capsys):
     assert capsys.readouterr().err.strip().count("\n") == 0
 
 
+@pytest.mark.parametrize("args, option", [
+    (["life-study", "--speeds", ","], "--speeds"),              # was: 0 runs, exit 0, "wrote ..." and nothing written
+    (["life-study", "--clearances", "5,x"], "--clearances"),
+    (["life-study", "--speeds", "nan"], "--speeds"),
+    (["life-study", "--workers", "0"], "--workers"),              # was: silently every core
+    (["reproduce", "--workers", "-1"], "--workers"),              # was: silently one
+    (["stepsize-study", "--workers", "0"], "--workers"),
+])
+def test_study_options_without_a_usable_value_are_refused_in_one_line(tmp_path, capsys, args, option):
+    out = tmp_path / "out"
+    try:
+        code = main([*args, "--out", str(out), "--quiet"])
+    except SystemExit as info:   # argparse
+        code = info.code
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and option in err
+    assert not list(out.glob("*.csv"))
+
+
 def test_cli_ball_count_beyond_the_capacity_names_options_that_exist(tmp_path, capsys, ball_bearing_fmu):
     code = main(["run", "--balls", "100", "--set", "allow_ball_overlap=1", "--fmu", str(ball_bearing_fmu),
                  "--out", str(tmp_path / "r"), "--quiet", "--revs", "0.01"])

@@ -6,9 +6,16 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Callable
 
 
+def requested_workers(workers: int | None) -> int:
+    """``--workers`` (default ``None``: the CPU count); zero or negative is an error, not a silent default."""
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers {workers}: must be at least 1")
+    return workers or os.cpu_count() or 1
+
+
 def worker_count(workers: int | None, jobs: int) -> int:
     """Processes to use: ``workers`` (default: the CPU count), at most one per job, at least one."""
-    return max(1, min(workers or os.cpu_count() or 1, jobs or 1))
+    return max(1, min(requested_workers(workers), jobs or 1))
 
 
 def map_jobs(fn: Callable, jobs: list[tuple], workers: int, desc: str, progress: bool = True,

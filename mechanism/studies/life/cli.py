@@ -1,6 +1,7 @@
 """``python -m mechanism life-study``: the subcommand (see the package docstring)."""
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 import time
@@ -10,7 +11,14 @@ from mechanism.studies.life import cases, figures, runs, tables
 
 
 def _floats(text: str) -> tuple[float, ...]:
-    return tuple(float(x) for x in text.split(",") if x.strip())
+    """A comma-separated list of finite numbers, at least one (argparse names the option on an error)."""
+    try:
+        values = tuple(float(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        values = ()
+    if not values or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}")
+    return values
 
 
 def cmd_life_study(args) -> int:
@@ -21,8 +29,8 @@ def cmd_life_study(args) -> int:
                          f"give the life of 1e-5 s steps (larger steps diverge or give wrong lives)")
     settings = cases.Settings(startup_revs=args.startup_revs, window_revs=args.window_revs, step=args.step,
                               balls=args.balls)
-    clearances = tuple(c * 1e-6 for c in _floats(args.clearances)) if args.clearances else cases.CLEARANCES
-    speeds = _floats(args.speeds) if args.speeds else cases.SPEEDS
+    clearances = tuple(c * 1e-6 for c in args.clearances) if args.clearances else cases.CLEARANCES
+    speeds = args.speeds if args.speeds else cases.SPEEDS
     pts = cases.points(clearances, speeds, args.rpm)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -55,9 +63,9 @@ def register(subparsers) -> None:
                               description=(__import__("mechanism.studies.life", fromlist=["x"]).__doc__ or "")
                               .split("\n\n")[0].replace("``", ""))
     p.add_argument("--out", default="results/life", help="output folder (default results/life)")
-    p.add_argument("--clearances", default=None, metavar="LIST",
+    p.add_argument("--clearances", type=_floats, default=None, metavar="LIST",
                    help="radial clearances [µm], comma-separated (default -15,-10,-6,-3,0,5,10,20,40,60,100)")
-    p.add_argument("--speeds", default=None, metavar="LIST",
+    p.add_argument("--speeds", type=_floats, default=None, metavar="LIST",
                    help="crank speeds [rpm] of the speed sweep (default 300,450,600,900,1200,1500,1800)")
     p.add_argument("--rpm", type=float, default=cases.CLEARANCE_RPM, help="crank speed of the clearance sweep")
     p.add_argument("--balls", type=int, default=8, help="number of balls (default 8)")

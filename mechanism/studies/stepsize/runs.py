@@ -11,6 +11,7 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Iterable
+from mechanism.studies.parallel import requested_workers
 from mechanism.studies.stepsize.cases import (ADAPTIVE, COLUMNS, COLUMN_NAMES, DIVERGENT, ERROR, FAILED, NONFINITE, REFERENCE_COLUMNS, SKIPPED, STABLE, StudyConfig, build_cases, physical_case, reference_key)
 from mechanism.studies.stepsize.figures import (plot_study)
 from mechanism.studies.stepsize.reference import (_clean, compare, load_reference, reference_job, save_reference)
@@ -103,7 +104,7 @@ class Executor:
     """Runs ``fn(*args)`` jobs on a local process pool or a Dask cluster; yields (key, result) as they finish."""
 
     def __init__(self, workers: int | None = None, scheduler: str | None = None):
-        self.workers = max(1, workers or os.cpu_count() or 1)
+        self.workers = requested_workers(workers)
         self.scheduler = scheduler
         self._pool = None
         self._client = None
@@ -244,7 +245,7 @@ def run_study(config: StudyConfig) -> StudyResult:
     ordered = [rows[i] for i in sorted(rows)]
     summary = summarize(ordered, config)
     summary["wall_time_s"] = time.perf_counter() - start
-    summary["executor"] = config.scheduler or f"{max(1, config.workers or os.cpu_count() or 1)} local processes"
+    summary["executor"] = config.scheduler or f"{requested_workers(config.workers)} local processes"
     summary["references"] = {k: {"physical_case": physical[k], "error": reference_errors.get(k)} for k in physical}
     write_csv(ordered, out / "stepsize.csv")
     (out / "stepsize_summary.json").write_text(json.dumps(summary, indent=2) + "\n")
