@@ -121,6 +121,18 @@ def write_csv(r: RunResult, path: Path) -> None:
             f.write("".join([line % row for row in map(tuple, r.data[k:k + CSV_CHUNK_ROWS].tolist())]))
 
 
+def write_rows(rows: list[dict], columns: tuple[tuple[str, str], ...], path: Path, digits: int = 15) -> None:
+    """A table of a study: header 'name [unit]' (just 'name' without a unit), one row per dict; floats to
+    ``digits`` significant digits, missing values (absent or None) as empty cells; written atomically."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow([f"{c} [{u}]" if u else c for c, u in columns])
+        for row in rows:
+            w.writerow(["" if row.get(c) is None else (f"{row[c]:.{digits}g}" if isinstance(row[c], float) else row[c])
+                        for c, _ in columns])
+
+
 def write_json(data: dict, path: Path) -> None:
     """``data`` as indented JSON (written atomically)."""
     with atomic_open(path, "w") as f:

@@ -1,8 +1,9 @@
 """The life study's tables: one CSV per sweep (SI, units in the header)."""
 from __future__ import annotations
 
-import csv
 from pathlib import Path
+
+from mechanism.output.results import write_rows
 
 #: CSV columns and their units
 COLUMNS = (("sweep", ""), ("rpm", "rev/min"), ("radial_clearance", "m"), ("window_start_s", "s"),
@@ -12,10 +13,5 @@ COLUMNS = (("sweep", ""), ("rpm", "rev/min"), ("radial_clearance", "m"), ("windo
 
 
 def write_csv(rows: list[dict], path: Path) -> None:
-    """Rows of one sweep to ``path`` (header ``name [unit]``)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow([f"{name} [{unit}]" if unit else name for name, unit in COLUMNS])
-        for row in rows:
-            w.writerow([f"{row[name]:.10g}" if isinstance(row[name], float) else row[name] for name, _ in COLUMNS])
+    """Rows of one sweep to ``path`` (header ``name [unit]``, written atomically)."""
+    write_rows(rows, COLUMNS, path, digits=10)

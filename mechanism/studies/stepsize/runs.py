@@ -11,6 +11,7 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Iterable
+from mechanism.output.results import write_rows
 from mechanism.studies.parallel import requested_workers
 from mechanism.studies.stepsize.cases import (ADAPTIVE, COLUMNS, COLUMN_NAMES, DIVERGENT, ERROR, FAILED, NONFINITE, REFERENCE_COLUMNS, SKIPPED, STABLE, StudyConfig, build_cases, physical_case, reference_key)
 from mechanism.studies.stepsize.figures import (plot_study)
@@ -256,13 +257,8 @@ def run_study(config: StudyConfig) -> StudyResult:
 
 
 def write_csv(rows: list[dict], path: Path) -> None:
-    """One row per case; header 'name [unit]'; missing values are empty cells (never NaN)."""
-    with open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow([f"{c} [{u}]" if u else c for c, u in COLUMNS])
-        for row in rows:
-            w.writerow(["" if row.get(c) is None else (f"{row[c]:.15g}" if isinstance(row[c], float) else row[c])
-                        for c in COLUMN_NAMES])
+    """One row per case; header 'name [unit]'; missing values are empty cells (never NaN); written atomically."""
+    write_rows(rows, COLUMNS, path)
 
 
 def read_csv(path: Path) -> list[dict]:
