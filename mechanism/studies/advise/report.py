@@ -8,14 +8,7 @@ from pathlib import Path
 from mechanism.studies.advise.runs import Advice
 from mechanism.studies.advise.search import MERITS
 from mechanism.studies.stepsize.runs import write_csv
-
-
-def _s(h: float | None) -> str:
-    return "—" if h is None else f"{h:.3g} s"
-
-
-def _pct(x: float | None) -> str:
-    return "—" if x is None else f"{100 * x:.3g} %"
+from mechanism.studies.stepsize.tables import fmt_percent, fmt_quantity
 
 
 def operating_point(advice: Advice) -> str:
@@ -40,12 +33,12 @@ def limit_text(advice: Advice, scheme: str, which: str) -> str:
         return f"error: {search.error}"
     lim = search.limit(which)
     if lim["above_range"]:
-        return f"≥ {_s(lim['step'])} (bound: the largest step tried; raise --max-step)"
+        return f"≥ {fmt_quantity(lim['step'])} (bound: the largest step tried; raise --max-step)"
     if lim["below_range"]:
-        return f"< {_s(lim['fails_at'])} (bound: fails at the smallest step the cost cap allows)"
+        return f"< {fmt_quantity(lim['fails_at'])} (bound: fails at the smallest step the cost cap allows)"
     if lim["step"] is None:
         return "— (not bracketed)"
-    return f"{_s(lim['step'])} (fails at {_s(lim['fails_at'])})"
+    return f"{fmt_quantity(lim['step'])} (fails at {fmt_quantity(lim['fails_at'])})"
 
 
 def one_line(advice: Advice) -> str:
@@ -53,11 +46,11 @@ def one_line(advice: Advice) -> str:
     c, a = advice.config, advice.answer
     head = f"{operating_point(advice)}, {merit_label(advice)} within {100 * c.tolerance:g} %: "
     if a is None:
-        return head + (f"no scheme meets it at any step ≥ {_s(advice.ladder[0])} (the cost cap --max-steps "
+        return head + (f"no scheme meets it at any step ≥ {fmt_quantity(advice.ladder[0])} (the cost cap --max-steps "
                        f"{c.max_steps}); see the table")
-    step = ("≥ " if a["bound"] else "") + _s(a["step_s"])
+    step = ("≥ " if a["bound"] else "") + fmt_quantity(a["step_s"])
     stable = "; ".join(f"{s} {limit_text(advice, s, 'stable').split(' (')[0]}" for s in advice.searches)
-    return (head + f"use {a['scheme']} at h = {step} ({_pct(a['merit_error'])} off, {a['cpu_time_s']:.2g} s CPU "
+    return (head + f"use {a['scheme']} at h = {step} ({fmt_percent(a['merit_error'])} off, {a['cpu_time_s']:.2g} s CPU "
             f"for {c.revs:g} revolutions); largest stable steps: {stable}")
 
 
@@ -67,7 +60,7 @@ def table_rows(advice: Advice) -> list[list[str]]:
         within = search.limit("within")
         row = within["row"] or {}
         rows.append([s, limit_text(advice, s, "stable"), limit_text(advice, s, "within"),
-                     _pct(row.get("merit_error")),
+                     fmt_percent(row.get("merit_error")),
                      "—" if row.get("wall_time") is None else
                      f"{row.get('cpu_time', math.nan):.2g} s ({row['wall_time']:.2g} s)",
                      str(len(search.rows)) + (" (non-monotone)" if search.non_monotone else "")])
@@ -116,7 +109,7 @@ def markdown(advice: Advice) -> str:
              "- the cheapest scheme is the one whose run at its largest step within the tolerance took the least "
              "CPU time (the wall time, also given, depends on the machine's load)",
              "- reference floor (rtol 1e-11 against 1e-12, relative): " +
-             (", ".join(f"{k} {_pct(v)}" for k, v in floor.items()) or "not measured"), "",
+             (", ".join(f"{k} {fmt_percent(v)}" for k, v in floor.items()) or "not measured"), "",
              "| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
     lines += ["| " + " | ".join(r) + " |" for r in table_rows(advice)]
     lines += ["", timing_text(advice) + ".", "",

@@ -10,7 +10,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from mechanism.output.plots import crank_pi, plot_trajectory  # noqa: E402
-from mechanism.studies.reproduce.analysis import (ball_angles, ball_loads, eccentricity, error_pattern, half_clearance_of, n_balls_of, on_times, orbit_window, rev_mask, rms, window)  # noqa: E402
+from mechanism.studies.reproduce.analysis import (ball_angles, crank_period, ball_loads, eccentricity, error_pattern, half_clearance_of, n_balls_of, on_times, orbit_window, rev_mask, rms, window)  # noqa: E402
 from mechanism.studies.reproduce.drawing import (increasing, save_figure, pi_axis, verdict_word)  # noqa: E402
 from mechanism.studies.reproduce.paper import (CLAIMS, PAPER)  # noqa: E402
 from mechanism.studies.reproduce.verdicts import ALIKE, CLOSE_TO_IDEAL, START_REVS, STARTUP, STEADY  # noqa: E402
@@ -283,7 +283,7 @@ class SpeedFigures:
         start_f, start_a = [], []
         for b, i in zip(self.bearing, self.ideal):
             r, ideal = self.runs[b], self.runs[i]
-            m = r["time"] <= START_REVS * 60.0 / float(r.meta["config"]["rpm"])
+            m = r["time"] <= START_REVS * crank_period(r)
             start_f.append(float(np.max(np.hypot(r["F_x"], r["F_y"])[m]) /
                                  max(np.max(np.hypot(on_times(ideal, r, "F_x"), on_times(ideal, r, "F_y"))[m]), 1e-30)))
             start_a.append(float(np.max(np.abs(r["slider_a"][m])) / max(np.max(np.abs(on_times(ideal, r, "slider_a")[m])),

@@ -113,13 +113,14 @@ def summarize(rows: list[dict], config: StudyConfig) -> dict:
     }
 
 
-def _fmt(x, unit: str = "s") -> str:
+def fmt_quantity(x, unit: str = "s") -> str:
+    """A value to 3 significant digits with its unit (default seconds); "—" for None."""
     if x is None:
         return "—"
     return f"{x:.3g}" + (f" {unit}" if unit else "")
 
 
-def _pct(x) -> str:
+def fmt_percent(x) -> str:
     """A relative error (fraction) in percent."""
     return "—" if x is None else f"{100 * x:.3g} %"
 
@@ -128,8 +129,8 @@ def step_limit(e: dict, key: str) -> str:
     """A largest step, marked as a lower bound ("≥ h, the largest step tried") when nothing larger ran."""
     h, top = e.get(key), e.get("largest_step_tried_s")
     if h is not None and top is not None and h >= top:
-        return f"≥ {_fmt(h)} (the largest step tried)"
-    return _fmt(h)
+        return f"≥ {fmt_quantity(h)} (the largest step tried)"
+    return fmt_quantity(h)
 
 
 def summary_markdown(summary: dict, config: StudyConfig) -> str:
@@ -143,8 +144,8 @@ def summary_markdown(summary: dict, config: StudyConfig) -> str:
     for g, info in summary["groups"].items():
         floors = next(iter(info["schemes"].values()))["reference_floor"]
         lines += [f"## {g}", "", f"Window {info['window_s'][0]:.4g} .. {info['window_s'][1]:.4g} s. Reference floor "
-                  f"(rtol vs rtol/10, max pointwise): joint force {_pct(floors['force_max_rel'])}, "
-                  f"eccentricity {_pct(floors['ecc_max_rel'])}.", "",
+                  f"(rtol vs rtol/10, max pointwise): joint force {fmt_percent(floors['force_max_rel'])}, "
+                  f"eccentricity {fmt_percent(floors['ecc_max_rel'])}.", "",
                   "| scheme | largest stable step | smallest unstable step | largest step with peak error ≤ 1 % "
                   "| peak error there [%] (worse of peak joint force and max eccentricity) "
                   "| largest step with pointwise joint-force error ≤ 1 % | observed order (force) "
@@ -159,11 +160,11 @@ def summary_markdown(summary: dict, config: StudyConfig) -> str:
             cheap_s = (f"{cheap['wall_time_s']:.3g} s wall at h = {cheap['step_s']:.3g} s" if cheap else "—")
             if scheme == ADAPTIVE:
                 tol = e.get("largest_tol_within_1pct")
-                largest = f"tol {tol:g} (mean step {_fmt(e['largest_step_within_1pct_s'])})" if tol else "—"
+                largest = f"tol {tol:g} (mean step {fmt_quantity(e['largest_step_within_1pct_s'])})" if tol else "—"
             else:
                 largest = step_limit(e, "largest_step_within_1pct_s")
-            lines.append(f"| {scheme} | {step_limit(e, 'largest_stable_step_s')} | {_fmt(e['smallest_unstable_step_s'])} | "
-                         f"{largest} | {_pct(e['peak_error_at_that_step'])} | "
+            lines.append(f"| {scheme} | {step_limit(e, 'largest_stable_step_s')} | {fmt_quantity(e['smallest_unstable_step_s'])} | "
+                         f"{largest} | {fmt_percent(e['peak_error_at_that_step'])} | "
                          f"{step_limit(e, 'largest_step_within_1pct_pointwise_s')} | {order} | {rng} | {cheap_s} |")
         ad = info["schemes"].get(ADAPTIVE)
         if ad:
@@ -172,8 +173,8 @@ def summary_markdown(summary: dict, config: StudyConfig) -> str:
                       "| peak error [%] (peak joint force, max eccentricity) | status |",
                       "|---|---|---|---|---|---|---|"]
             for r in ad["tolerance_vs_error"]:
-                lines.append(f"| {r['tol']:g} | {_fmt(r['mean_step_s'])} | {r['accepted']} | {r['rejected']} | "
-                             f"{_pct(r['err_force_max_rel'])} | {_pct(r[PEAK_METRIC])} | {r['status']} |")
+                lines.append(f"| {r['tol']:g} | {fmt_quantity(r['mean_step_s'])} | {r['accepted']} | {r['rejected']} | "
+                             f"{fmt_percent(r['err_force_max_rel'])} | {fmt_percent(r[PEAK_METRIC])} | {r['status']} |")
         lines.append("")
     lines += ["Plots: `stepsize_error_vs_step_<group>.png` (errors against the step, log-log, with the fitted "
               "order and the stability limit), `stepsize_error_vs_walltime_<group>.png`.", ""]
