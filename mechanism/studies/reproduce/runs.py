@@ -9,7 +9,7 @@ from pathlib import Path
 from mechanism.run import RunConfig
 from mechanism.studies.reproduce.cache import (cache_dir, code_version, config_key, ensure_fmus, is_cached, load_result, save_result)
 from mechanism.studies.reproduce.cases import (RunSpec, run_specs)
-from mechanism.studies.parallel import map_jobs, worker_count
+from mechanism.studies.parallel import map_jobs, requested_workers, worker_count
 
 
 def _compute(name: str, config: RunConfig, path: str, key: str, version: str) -> dict:
@@ -32,6 +32,7 @@ def _cost(spec: RunSpec) -> float:
 def run_all(out: Path, specs: list[RunSpec], force: bool = False, workers: int | None = None,
             progress: bool = True) -> dict:
     """Run (or take from the cache) every spec; return {"results", "infos", "computed", "cached", ...}."""
+    requested_workers(workers)   # a bad --workers before any FMU is built
     out = Path(out)
     names = [s.name for s in specs]
     if len(set(names)) != len(names):
