@@ -346,8 +346,6 @@ class CouplingLoop:
             for passes in range(1, limit + 1):
                 y_end = self.advance(y, t0, h, step, t)
                 end = scheme.past[-1]
-                jumps = () if energy is None else onset_jumps(energy.bearing, start, cage_start, end,
-                                                              energy.cage_angle(y_end[:n]))
                 if previous is not None and scheme.converged(
                         previous, end, self.settings.iteration_tol, max(1e-6, math.hypot(end.e_x, end.e_y))):
                     break
@@ -355,6 +353,8 @@ class CouplingLoop:
                     stats["not_converged"] += 1
                     break
                 previous = end
+                jumps = () if energy is None else onset_jumps(energy.bearing, start, cage_start, end,
+                                                              energy.cage_angle(y_end[:n]))
                 self.restore(snap)
                 scheme.set_trial(end, jumps)
         finally:
