@@ -31,6 +31,7 @@ angles): the law's truth along the trajectory, independent of how the component 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 
@@ -83,11 +84,14 @@ class EnergyAccount:
         elastic = self.bearing.evaluate(ex, ey, 0.0, 0.0, cage, wi, wo)
         return law.F_x, law.F_y, elastic.F_x, elastic.F_y, self.bearing.elastic_energy(ex, ey, cage)
 
-    def update(self, t: float, q: np.ndarray, qd: np.ndarray, lam: np.ndarray) -> dict[str, float]:
-        """Account up to time t [s] for the state (q, qd) and the multipliers lam of eq. (9) (model order)."""
+    def update(self, t: float, q: np.ndarray, qd: np.ndarray, lam: np.ndarray, inputs: Sequence[float] | None = None,
+               kinetic: float | None = None) -> dict[str, float]:
+        """Account up to time t [s] for the state (q, qd) and the multipliers lam of eq. (9) (model order).
+
+        ``inputs`` (the link's (e, v, omega) at (q, qd)) and ``kinetic`` (T at qd) when the caller has them."""
         if self._last is None:
             self._angles0 = self.link.ring_angles(q)
-        ex, ey, vx, vy, wi, wo = self.link.inputs(q, qd)
+        ex, ey, vx, vy, wi, wo = self.link.inputs(q, qd) if inputs is None else inputs
         cage = self.cage_angle(q)
         fx, fy, el_x, el_y, potential = self._forces(ex, ey, vx, vy, cage, wi, wo)
         system = self.system
@@ -95,7 +99,8 @@ class EnergyAccount:
                   float(np.dot(lam, system.phi_t(t))) if system.m else 0.0,                   # drivers
                   self.bearing.cage_velocity(wi, wo) * (el_x * ey - el_y * ex),                # cage
                   float(np.dot(system.applied_forces(q, qd, t), qd)))                          # applied
-        kinetic = system.kinetic_energy(qd)
+        if kinetic is None:
+            kinetic = system.kinetic_energy(qd)
         if self._last is None:
             self._start = kinetic + potential
         else:
