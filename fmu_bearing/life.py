@@ -214,17 +214,17 @@ class LifeAccumulator:
             if q > 0.0:
                 s3 += q * q * q
                 s103 += q ** P_STATIONARY
+        dn = abs(omega_inner - omega_outer) * dt / (2.0 * math.pi)   # revolutions of one ring relative to the other
         if s3 > 0.0:
             q_rot3 = s3 / z                                   # (cubic mean)^3
             q_stat3 = (s103 / z) ** (P_BALL / P_STATIONARY)   # ((10/3)-power mean)^3
-            dn = abs(omega_inner - omega_outer) * dt / (2.0 * math.pi)
             if abs(omega_inner - load_angular_velocity) >= abs(omega_outer - load_angular_velocity):
                 self.sum_cubed_inner += q_rot3 * dn
                 self.sum_cubed_outer += q_stat3 * dn
             else:
                 self.sum_cubed_inner += q_stat3 * dn
                 self.sum_cubed_outer += q_rot3 * dn
-        self.revolutions += abs(omega_inner - omega_outer) * dt / (2.0 * math.pi)
+        self.revolutions += dn
         self.time += dt
 
     # --- results ----------------------------------------------------------------------------------
