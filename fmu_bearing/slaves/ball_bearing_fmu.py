@@ -120,7 +120,6 @@ class BallBearing(Fmi2Slave, BearingStepping):
         self._terminated = False                   # fmi2Terminate was called: no more steps
         self._loads = [0.0] * self.capacity        # ball_load_k outputs (fixed list object: getters bind to it)
         self._scratch = [0.0] * self.capacity      # evaluate() writes here; copied to _loads on success
-        self._param_names = tuple(f.name for f in fields(BearingParameters))
 
         cont, fixed, discrete = Fmi2Variability.continuous, Fmi2Variability.fixed, Fmi2Variability.discrete
         output, calculated = Fmi2Causality.output, Fmi2Initial.calculated   # outputs: computed at initialisation
@@ -202,10 +201,6 @@ class BallBearing(Fmi2Slave, BearingStepping):
     # reference counts on that path (see fmu_bearing.slaves), so the only exception raised here is
     # the one that fails exitInitializationMode. Everything else logs (status error) and returns: a
     # refused doStep returns False (fmi2Discard); a refused set/get call is reported by the next doStep.
-    def parameters(self) -> BearingParameters:
-        """The current parameter values as BearingParameters."""
-        return BearingParameters(**{name: getattr(self, name) for name in self._param_names})
-
     def exit_initialization_mode(self):
         try:
             bearing = physics.BallBearing(self.parameters(), self.capacity)  # validates, names the parameter

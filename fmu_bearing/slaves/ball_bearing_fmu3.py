@@ -166,7 +166,6 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         self._life = None              # life.LifeAccumulator, built at exit of initialisation
         self._terminated = False       # fmi3Terminate was called: no more steps
         self._pending_error = None     # a refused call, reported by the next doStep
-        self._param_names = tuple(f.name for f in fields(BearingParameters))
         defaults = BearingParameters()
         self._resize_loads(int(defaults.n_balls))      # ball_loads: always n_balls long
         units = set()
@@ -263,10 +262,6 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         self._loads, self._scratch = [0.0] * n, [0.0] * n
 
     # --- FMI ----------------------------------------------------------------------------------
-    def parameters(self):
-        """The current parameter values as BearingParameters."""
-        return BearingParameters(**{name: getattr(self, name) for name in self._param_names})
-
     def exit_initialization_mode(self):
         try:
             if not 3 <= self.n_balls <= MAX_BALLS:

@@ -16,9 +16,11 @@ added to it after each good step (held over the step); ``_publish_ratings`` copi
 the FMU state under ``LIFE_STATE`` (``_life_state``; ``_restored_life`` checks them before any assignment).
 """
 import math
+from dataclasses import fields
 
 from fmu_bearing import ball_bearing as physics
 from fmu_bearing import life
+from fmu_bearing.parameters import BearingParameters
 
 #: key of the life accumulator's sums (LifeAccumulator.state()) in a saved FMU state
 LIFE_STATE = "__life_accumulator__"
@@ -38,6 +40,12 @@ class BearingStepping:
 
     #: the FMI call that set ``_terminated`` (named in the refusal of a later step)
     TERMINATE_CALL = "fmi2Terminate"
+    #: the parameter variables: one per BearingParameters field, same name
+    _param_names = tuple(f.name for f in fields(BearingParameters))
+
+    def parameters(self) -> BearingParameters:
+        """The current parameter values as BearingParameters."""
+        return BearingParameters(**{name: getattr(self, name) for name in self._param_names})
 
     def _advance(self, step_size):
         """Advance over one step of ``step_size`` [s]; None, or why the step is refused (outputs unchanged)."""
