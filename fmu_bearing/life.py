@@ -151,12 +151,6 @@ class LoadRatings:
                       params.inner_groove_conformity, params.outer_groove_conformity)
 
 
-def power_mean(loads: Sequence[float], exponent: float, n: int | None = None) -> float:
-    """(1/Z sum_j Q_j^p)^(1/p) over Z = n (default len(loads)) rolling elements; negative loads count as 0."""
-    z = len(loads) if n is None else n
-    return (sum(q ** exponent for q in loads if q > 0.0) / z) ** (1.0 / exponent)
-
-
 def rating_life(q_ci: float, q_ce: float, q_ei: float, q_ee: float, reliability_factor: float = 1.0) -> float:
     """L10r [millions of revolutions] = a1 [(Q_ci/Q_ei)^(-10/3) + (Q_ce/Q_ee)^(-10/3)]^(-9/10).
 
