@@ -30,8 +30,9 @@ from fmu_bearing import ball_bearing as physics
 from fmu_bearing import life
 from fmu_bearing.parameters import BearingParameters, validate
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
-from fmu_bearing.slaves import (HostLogger, add_initial_unknowns, add_unit_definitions, guard_pythonfmu_exit,
-                                hold_before_raise, read_build_options, release_on_free, weak_accessors)
+from fmu_bearing.slaves import (INVALID_STATE, HostLogger, add_initial_unknowns, add_unit_definitions,
+                                guard_pythonfmu_exit, hold_before_raise, read_build_options, refuse_state,
+                                release_on_free, state_from_bytes, weak_accessors)
 from fmu_bearing.slaves.state import check_state, variable_kinds
 from fmu_bearing.slaves.stepping import LIFE_STATE, BearingStepping, ignore_value, life_output
 
@@ -89,10 +90,6 @@ class IntegerVariable(_TypeAttributes, Integer):
 
 class BooleanVariable(_TypeAttributes, Boolean):
     pass
-
-
-#: key of the state returned for bytes that are not a serialized state (no exception may escape)
-_INVALID_STATE = "__invalid_state__"
 
 
 class BallBearing(Fmi2Slave, BearingStepping):
@@ -303,10 +300,8 @@ class BallBearing(Fmi2Slave, BearingStepping):
 
     @staticmethod
     def _fmu_state_from_bytes(state):
-        try:
-            return Fmi2Slave._fmu_state_from_bytes(state)
-        except Exception as err:  # no exception may reach pythonfmu's C++ side
-            return {_INVALID_STATE: f"fmi2DeSerializeFMUstate: not a serialized BallBearing state ({err!r})"}
+        return state_from_bytes(Fmi2Slave._fmu_state_from_bytes, state,
+                                "fmi2DeSerializeFMUstate: not a serialized BallBearing state")
 
     def _set_fmu_state(self, state):
         """Restore a state after checking all of it (``fmu_bearing.slaves.state``); a state that is not ours
@@ -316,9 +311,7 @@ class BallBearing(Fmi2Slave, BearingStepping):
         except Exception as err:  # no exception may reach pythonfmu's C++ side
             problem = f"not a BallBearing state ({err!r})"
         if problem is not None:
-            message = f"setFMUstate refused: {problem}; the instance is unchanged"
-            self._error(message)
-            self._pending_error = self._pending_error or message
+            refuse_state(self, problem)
             return
         for var in self.vars.values():
             if var.setter is not None:
@@ -329,8 +322,8 @@ class BallBearing(Fmi2Slave, BearingStepping):
 
     def _state_problem(self, state):
         """None if ``state`` is a complete, valid state of this instance, else what is wrong with it."""
-        if isinstance(state, dict) and _INVALID_STATE in state:
-            return str(state[_INVALID_STATE])
+        if isinstance(state, dict) and INVALID_STATE in state:
+            return str(state[INVALID_STATE])
         fixed = None
         if self._bearing is not None:   # parameters are fixed once initialised: they must be this instance's
             fixed = {name: getattr(self, name) for name in self._param_names}

@@ -50,7 +50,8 @@ try:
     from fmu_bearing import life
     from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
     from fmu_bearing.parameters import BearingParameters
-    from fmu_bearing.slaves import UNIT_DEFINITIONS, hold_before_raise, release_on_free, weak_accessors
+    from fmu_bearing.slaves import (INVALID_STATE, UNIT_DEFINITIONS, hold_before_raise, release_on_free,
+                                    state_from_bytes, weak_accessors)
     from fmu_bearing.slaves.stepping import LIFE_STATE, BearingStepping, ignore_value, life_output
     _IMPORT_ERROR = None
 except Exception as _err:  # noqa: BLE001 - reported at instantiation
@@ -75,8 +76,6 @@ MAX_BALLS = 10_000
 _INT_RANGES = {"damping_model": (0, 2)}
 
 _INPUT_VRS = list(range(len(JOINT_INPUTS)))
-#: key of the state returned for bytes that are not a serialized state (no exception may escape)
-_INVALID_STATE = "__invalid_state__"
 #: extra key of a saved state: whether the instance was initialised
 _INITIALISED = "__initialised__"
 
@@ -380,15 +379,13 @@ class BallBearing3(Fmi3Slave, BearingStepping):
 
     @staticmethod
     def _fmu_state_from_bytes(state):
-        try:
-            return Fmi3Slave._fmu_state_from_bytes(state)
-        except Exception as err:  # no exception may reach pythonfmu3's C++ side
-            return {_INVALID_STATE: f"fmi3DeserializeFMUState: not a serialized BallBearing3 state ({err!r})"}
+        return state_from_bytes(Fmi3Slave._fmu_state_from_bytes, state,
+                                "fmi3DeserializeFMUState: not a serialized BallBearing3 state")
 
     def _set_fmu_state(self, state):
         """Check the whole state (names, types, parameters, array size, life sums) before assigning any of it."""
         try:
-            message = state.get(_INVALID_STATE) if isinstance(state, dict) else "not a BallBearing3 state"
+            message = state.get(INVALID_STATE) if isinstance(state, dict) else "not a BallBearing3 state"
             if message is None:
                 values, bearing, accumulator = self._check_state(state)
         except Exception as err:
