@@ -377,6 +377,35 @@ def test_invalid_life_sums_in_a_state_are_refused_before_anything_is_assigned(fm
         s.free()
 
 
+def test_non_finite_values_in_a_state_are_refused_before_anything_is_assigned(fmu3):
+    """JSON carries NaN and Infinity: a serialized state with one in an input, output or the ball loads is
+    refused (nothing assigned, the message names the variable, the next doStep is refused), as in FMI 2.0."""
+    rng = np.random.default_rng(6)
+    s = Slave3(fmu3, {}, random_inputs(rng))
+    try:
+        s.s.exitInitializationMode()
+        s.step(0.0, 1e-5, random_inputs(rng))
+        state = s.s.getFMUState()
+        saved = json.loads(s.s.serializeFMUState(state).rstrip(b"\0").decode())
+        s.s.freeFMUState(state)
+        s.step(1e-5, 1e-5, random_inputs(rng))
+        now = s.outputs()
+        for name, bad in (("F_x", float("nan")), ("e_y", float("inf")), ("cage_angle", -float("inf")),
+                          ("ball_loads", [float("nan")] * len(saved["ball_loads"]))):
+            broken = dict(saved, **{name: bad})
+            restored = s.s.deserializeFMUState(json.dumps(broken).encode())
+            s.s.setFMUState(restored)
+            s.s.freeFMUState(restored)
+            assert s.outputs() == now
+            assert name in s.messages[-1][2] and "not finite" in s.messages[-1][2], s.messages[-1]
+            with pytest.raises(FMICallException) as err:
+                s.s.doStep(2e-5, 1e-5)
+            assert err.value.status == DISCARD
+            assert s.outputs() == now
+    finally:
+        s.free()
+
+
 # --- errors: a status and a message, never a crash ---------------------------------------------
 
 def test_refused_step_keeps_the_last_good_outputs(fmu3):

@@ -33,6 +33,7 @@ class by a regular expression on its source lines (the first class statement der
 no other line may look like one; it uses absolute imports only and no ``from __future__`` import.
 """
 import ctypes
+import math
 import sys
 import weakref
 from dataclasses import fields
@@ -416,6 +417,10 @@ class BallBearing3(Fmi3Slave, BearingStepping):
                 values[v.name] = [float(x) for x in state[v.name]]
             else:
                 values[v.name] = convert[self._kind[vr]](state[v.name])
+        not_finite = [name for name, value in values.items() if name not in _LIFE_NAMES   # a life may be inf
+                      and not all(map(math.isfinite, value if isinstance(value, list) else [value]))]
+        if not_finite:   # JSON carries NaN and Infinity: never restore one into an input, output or parameter
+            raise ValueError(f"{not_finite[0]} = {values[not_finite[0]]!r} is not finite")
         params = BearingParameters(**{name: values[name] for name in self._param_names})
         bearing = accumulator = None
         if state[_INITIALISED]:
