@@ -51,15 +51,23 @@ class BearingForce(NamedTuple):
 def check_joint_inputs(eccentricity_limit: float, e_x: float, e_y: float, v_x: float, v_y: float,
                        omega_inner: float = 0.0, omega_outer: float = 0.0) -> None:
     """The input check every joint component shares: finite inputs, |e| within the divergence limit [m]."""
-    for name, value in (("e_x", e_x), ("e_y", e_y), ("v_x", v_x), ("v_y", v_y),
-                        ("omega_inner", omega_inner), ("omega_outer", omega_outer)):
-        if not math.isfinite(value):
-            raise BearingInputError(f"input {name} = {value!r} is not a finite number")
+    # Fast path (per doStep): a finite sum implies six finite inputs (an inf gives inf, a NaN or inf - inf NaN);
+    # a non-finite sum (also an overflow of finite ones) goes through the loop, which names the culprit.
+    if not math.isfinite(e_x + e_y + v_x + v_y + omega_inner + omega_outer):
+        _check_finite(e_x, e_y, v_x, v_y, omega_inner, omega_outer)
     e = math.hypot(e_x, e_y)
     if e > eccentricity_limit:
         raise BearingInputError(
             f"eccentricity |e| = {e:.6g} m exceeds eccentricity_limit = {eccentricity_limit:.6g} m "
             f"(the calling simulation has diverged)")
+
+
+def _check_finite(e_x, e_y, v_x, v_y, omega_inner, omega_outer) -> None:
+    """Raise BearingInputError naming the first non-finite input."""
+    for name, value in (("e_x", e_x), ("e_y", e_y), ("v_x", v_x), ("v_y", v_y),
+                        ("omega_inner", omega_inner), ("omega_outer", omega_outer)):
+        if not math.isfinite(value):
+            raise BearingInputError(f"input {name} = {value!r} is not a finite number")
 
 
 def cage_angular_velocity(omega_inner: float, omega_outer: float, d_inner: float, d_outer: float) -> float:

@@ -151,12 +151,6 @@ class LoadRatings:
                       params.inner_groove_conformity, params.outer_groove_conformity)
 
 
-def power_mean(loads: Sequence[float], exponent: float, n: int | None = None) -> float:
-    """(1/Z sum_j Q_j^p)^(1/p) over Z = n (default len(loads)) rolling elements; negative loads count as 0."""
-    z = len(loads) if n is None else n
-    return (sum(q ** exponent for q in loads if q > 0.0) / z) ** (1.0 / exponent)
-
-
 def rating_life(q_ci: float, q_ce: float, q_ei: float, q_ee: float, reliability_factor: float = 1.0) -> float:
     """L10r [millions of revolutions] = a1 [(Q_ci/Q_ei)^(-10/3) + (Q_ce/Q_ee)^(-10/3)]^(-9/10).
 
@@ -214,17 +208,17 @@ class LifeAccumulator:
             if q > 0.0:
                 s3 += q * q * q
                 s103 += q ** P_STATIONARY
+        dn = abs(omega_inner - omega_outer) * dt / (2.0 * math.pi)   # revolutions of one ring relative to the other
         if s3 > 0.0:
             q_rot3 = s3 / z                                   # (cubic mean)^3
             q_stat3 = (s103 / z) ** (P_BALL / P_STATIONARY)   # ((10/3)-power mean)^3
-            dn = abs(omega_inner - omega_outer) * dt / (2.0 * math.pi)
             if abs(omega_inner - load_angular_velocity) >= abs(omega_outer - load_angular_velocity):
                 self.sum_cubed_inner += q_rot3 * dn
                 self.sum_cubed_outer += q_stat3 * dn
             else:
                 self.sum_cubed_inner += q_stat3 * dn
                 self.sum_cubed_outer += q_rot3 * dn
-        self.revolutions += abs(omega_inner - omega_outer) * dt / (2.0 * math.pi)
+        self.revolutions += dn
         self.time += dt
 
     # --- results ----------------------------------------------------------------------------------

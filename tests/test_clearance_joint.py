@@ -93,6 +93,17 @@ def test_check_inputs():
         JOINT.check_inputs(0.0, 1.01 * JOINT.eccentricity_limit, 0.0, 0.0)
 
 
+def test_check_inputs_names_the_culprit_past_the_fast_path():
+    """check_joint_inputs tests the sum of the inputs first: an inf and a -inf (sum NaN) are still named, and
+    finite inputs whose sum overflows are still accepted."""
+    inf = float("inf")
+    with pytest.raises(BearingInputError, match="v_x"):
+        JOINT.check_inputs(0.0, 0.0, inf, -inf)
+    with pytest.raises(BearingInputError, match="omega_inner"):
+        JOINT.check_inputs(0.0, 0.0, 0.0, 0.0, -inf, inf)
+    JOINT.check_inputs(0.0, 0.0, 1e308, 1e308, 1e308, 1e308)   # sum inf, every input finite: fine
+
+
 # --- force law: closed forms -------------------------------------------------------------------
 
 @pytest.mark.parametrize("r", [0.0, 0.3 * C, 0.999999 * C, C])

@@ -344,18 +344,31 @@ def test_life_outputs_equal_the_fmi2_fmu_also_after_a_rollback(fmu3, ball_bearin
         b.free()
 
 
+def saved_state_then_a_step(s, rng) -> dict:
+    """Initialise ``s``, take a step, save its serialized state (parsed), take another step; the state."""
+    s.s.exitInitializationMode()
+    s.step(0.0, 1e-5, random_inputs(rng))
+    state = s.s.getFMUState()
+    saved = json.loads(s.s.serializeFMUState(state).rstrip(b"\0").decode())
+    s.s.freeFMUState(state)
+    s.step(1e-5, 1e-5, random_inputs(rng))
+    return saved
+
+
+def set_serialized_state(s, state: dict) -> None:
+    """fmi3DeserializeFMUState of ``state`` as JSON, then fmi3SetFMUState and fmi3FreeFMUState."""
+    restored = s.s.deserializeFMUState(json.dumps(state).encode())
+    s.s.setFMUState(restored)
+    s.s.freeFMUState(restored)
+
+
 def test_invalid_life_sums_in_a_state_are_refused_before_anything_is_assigned(fmu3):
     """A serialized state whose life accumulator is missing or invalid: setFMUState assigns nothing (outputs,
     cage angle and life unchanged), and the next doStep is refused with a message naming the accumulator."""
     rng = np.random.default_rng(5)
     s = Slave3(fmu3, {}, random_inputs(rng))
     try:
-        s.s.exitInitializationMode()
-        s.step(0.0, 1e-5, random_inputs(rng))
-        state = s.s.getFMUState()
-        saved = json.loads(s.s.serializeFMUState(state).rstrip(b"\0").decode())
-        s.s.freeFMUState(state)
-        s.step(1e-5, 1e-5, random_inputs(rng))
+        saved = saved_state_then_a_step(s, rng)
         now, life_now = s.outputs(), life3(s)
         assert saved[LIFE_STATE] and saved["cage_angle"] != s.s.getFloat64([s.vr["cage_angle"]])[0]
         for bad in ([-1.0, 0.0, 1.0, 1.0], [1.0, 2.0], "x", None):
@@ -364,15 +377,35 @@ def test_invalid_life_sums_in_a_state_are_refused_before_anything_is_assigned(fm
                 del broken[LIFE_STATE]
             else:
                 broken[LIFE_STATE] = bad
-            restored = s.s.deserializeFMUState(json.dumps(broken).encode())
-            s.s.setFMUState(restored)
-            s.s.freeFMUState(restored)
+            set_serialized_state(s, broken)
             assert s.outputs() == now and life3(s) == life_now
             assert "life accumulator" in s.messages[-1][2], s.messages[-1]
             with pytest.raises(FMICallException) as err:
                 s.s.doStep(2e-5, 1e-5)
             assert err.value.status == DISCARD
             assert s.outputs() == now and life3(s) == life_now
+    finally:
+        s.free()
+
+
+def test_non_finite_values_in_a_state_are_refused_before_anything_is_assigned(fmu3):
+    """JSON carries NaN and Infinity: a serialized state with one in an input, output or the ball loads is
+    refused (nothing assigned, the message names the variable, the next doStep is refused), as in FMI 2.0."""
+    rng = np.random.default_rng(6)
+    s = Slave3(fmu3, {}, random_inputs(rng))
+    try:
+        saved = saved_state_then_a_step(s, rng)
+        now = s.outputs()
+        for name, bad in (("F_x", float("nan")), ("e_y", float("inf")), ("cage_angle", -float("inf")),
+                          ("ball_loads", [float("nan")] * len(saved["ball_loads"]))):
+            broken = dict(saved, **{name: bad})
+            set_serialized_state(s, broken)
+            assert s.outputs() == now
+            assert name in s.messages[-1][2] and "not finite" in s.messages[-1][2], s.messages[-1]
+            with pytest.raises(FMICallException) as err:
+                s.s.doStep(2e-5, 1e-5)
+            assert err.value.status == DISCARD
+            assert s.outputs() == now
     finally:
         s.free()
 

@@ -97,6 +97,26 @@ def add_initial_unknowns(root, variables) -> None:
             SubElement(node, "Unknown", {"index": str(index)})
 
 
+#: key of the state that stands for bytes which are not a serialized state (``state_from_bytes``)
+INVALID_STATE = "__invalid_state__"
+
+
+def state_from_bytes(parse, data, what: str) -> dict:
+    """``parse(data)`` (the base class's ``_fmu_state_from_bytes``), or {INVALID_STATE: "<what> (<error>)"} for
+    bytes it cannot read: the slave's ``_set_fmu_state`` then refuses it (no exception may reach the C++ side)."""
+    try:
+        return parse(data)
+    except Exception as err:
+        return {INVALID_STATE: f"{what} ({err!r})"}
+
+
+def refuse_state(slave, problem: str) -> None:
+    """A refused fmi2SetFMUstate: logged (status error), reported again by the next doStep; nothing assigned."""
+    message = f"setFMUstate refused: {problem}; the instance is unchanged"
+    slave._error(message)
+    slave._pending_error = slave._pending_error or message
+
+
 def weak_accessors(slave, name):
     """(getter, setter) of attribute ``name`` of ``slave`` that do not keep the slave alive.
 

@@ -30,8 +30,9 @@ from fmu_bearing import ball_bearing as physics
 from fmu_bearing import life
 from fmu_bearing.parameters import BearingParameters, validate
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
-from fmu_bearing.slaves import (HostLogger, add_initial_unknowns, add_unit_definitions, guard_pythonfmu_exit,
-                                hold_before_raise, read_build_options, release_on_free, weak_accessors)
+from fmu_bearing.slaves import (INVALID_STATE, HostLogger, add_initial_unknowns, add_unit_definitions,
+                                guard_pythonfmu_exit, hold_before_raise, read_build_options, refuse_state,
+                                release_on_free, state_from_bytes, weak_accessors)
 from fmu_bearing.slaves.state import check_state, variable_kinds
 from fmu_bearing.slaves.stepping import LIFE_STATE, BearingStepping, ignore_value, life_output
 
@@ -91,10 +92,6 @@ class BooleanVariable(_TypeAttributes, Boolean):
     pass
 
 
-#: key of the state returned for bytes that are not a serialized state (no exception may escape)
-_INVALID_STATE = "__invalid_state__"
-
-
 class BallBearing(Fmi2Slave, BearingStepping):
     author = "bearing-cosim contributors"
     description = ("Deep-groove ball bearing with radial clearance (Xu et al., Mech. Mach. Theory 56, 2012): "
@@ -120,7 +117,6 @@ class BallBearing(Fmi2Slave, BearingStepping):
         self._terminated = False                   # fmi2Terminate was called: no more steps
         self._loads = [0.0] * self.capacity        # ball_load_k outputs (fixed list object: getters bind to it)
         self._scratch = [0.0] * self.capacity      # evaluate() writes here; copied to _loads on success
-        self._param_names = tuple(f.name for f in fields(BearingParameters))
 
         cont, fixed, discrete = Fmi2Variability.continuous, Fmi2Variability.fixed, Fmi2Variability.discrete
         output, calculated = Fmi2Causality.output, Fmi2Initial.calculated   # outputs: computed at initialisation
@@ -202,10 +198,6 @@ class BallBearing(Fmi2Slave, BearingStepping):
     # reference counts on that path (see fmu_bearing.slaves), so the only exception raised here is
     # the one that fails exitInitializationMode. Everything else logs (status error) and returns: a
     # refused doStep returns False (fmi2Discard); a refused set/get call is reported by the next doStep.
-    def parameters(self) -> BearingParameters:
-        """The current parameter values as BearingParameters."""
-        return BearingParameters(**{name: getattr(self, name) for name in self._param_names})
-
     def exit_initialization_mode(self):
         try:
             bearing = physics.BallBearing(self.parameters(), self.capacity)  # validates, names the parameter
@@ -308,10 +300,8 @@ class BallBearing(Fmi2Slave, BearingStepping):
 
     @staticmethod
     def _fmu_state_from_bytes(state):
-        try:
-            return Fmi2Slave._fmu_state_from_bytes(state)
-        except Exception as err:  # no exception may reach pythonfmu's C++ side
-            return {_INVALID_STATE: f"fmi2DeSerializeFMUstate: not a serialized BallBearing state ({err!r})"}
+        return state_from_bytes(Fmi2Slave._fmu_state_from_bytes, state,
+                                "fmi2DeSerializeFMUstate: not a serialized BallBearing state")
 
     def _set_fmu_state(self, state):
         """Restore a state after checking all of it (``fmu_bearing.slaves.state``); a state that is not ours
@@ -321,9 +311,7 @@ class BallBearing(Fmi2Slave, BearingStepping):
         except Exception as err:  # no exception may reach pythonfmu's C++ side
             problem = f"not a BallBearing state ({err!r})"
         if problem is not None:
-            message = f"setFMUstate refused: {problem}; the instance is unchanged"
-            self._error(message)
-            self._pending_error = self._pending_error or message
+            refuse_state(self, problem)
             return
         for var in self.vars.values():
             if var.setter is not None:
@@ -334,8 +322,8 @@ class BallBearing(Fmi2Slave, BearingStepping):
 
     def _state_problem(self, state):
         """None if ``state`` is a complete, valid state of this instance, else what is wrong with it."""
-        if isinstance(state, dict) and _INVALID_STATE in state:
-            return str(state[_INVALID_STATE])
+        if isinstance(state, dict) and INVALID_STATE in state:
+            return str(state[INVALID_STATE])
         fixed = None
         if self._bearing is not None:   # parameters are fixed once initialised: they must be this instance's
             fixed = {name: getattr(self, name) for name in self._param_names}

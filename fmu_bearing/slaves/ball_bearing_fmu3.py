@@ -33,6 +33,7 @@ class by a regular expression on its source lines (the first class statement der
 no other line may look like one; it uses absolute imports only and no ``from __future__`` import.
 """
 import ctypes
+import math
 import sys
 import weakref
 from dataclasses import fields
@@ -50,7 +51,8 @@ try:
     from fmu_bearing import life
     from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
     from fmu_bearing.parameters import BearingParameters
-    from fmu_bearing.slaves import UNIT_DEFINITIONS, hold_before_raise, release_on_free, weak_accessors
+    from fmu_bearing.slaves import (INVALID_STATE, UNIT_DEFINITIONS, hold_before_raise, release_on_free,
+                                    state_from_bytes, weak_accessors)
     from fmu_bearing.slaves.stepping import LIFE_STATE, BearingStepping, ignore_value, life_output
     _IMPORT_ERROR = None
 except Exception as _err:  # noqa: BLE001 - reported at instantiation
@@ -75,8 +77,6 @@ MAX_BALLS = 10_000
 _INT_RANGES = {"damping_model": (0, 2)}
 
 _INPUT_VRS = list(range(len(JOINT_INPUTS)))
-#: key of the state returned for bytes that are not a serialized state (no exception may escape)
-_INVALID_STATE = "__invalid_state__"
 #: extra key of a saved state: whether the instance was initialised
 _INITIALISED = "__initialised__"
 
@@ -166,7 +166,6 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         self._life = None              # life.LifeAccumulator, built at exit of initialisation
         self._terminated = False       # fmi3Terminate was called: no more steps
         self._pending_error = None     # a refused call, reported by the next doStep
-        self._param_names = tuple(f.name for f in fields(BearingParameters))
         defaults = BearingParameters()
         self._resize_loads(int(defaults.n_balls))      # ball_loads: always n_balls long
         units = set()
@@ -263,10 +262,6 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         self._loads, self._scratch = [0.0] * n, [0.0] * n
 
     # --- FMI ----------------------------------------------------------------------------------
-    def parameters(self):
-        """The current parameter values as BearingParameters."""
-        return BearingParameters(**{name: getattr(self, name) for name in self._param_names})
-
     def exit_initialization_mode(self):
         try:
             if not 3 <= self.n_balls <= MAX_BALLS:
@@ -385,15 +380,13 @@ class BallBearing3(Fmi3Slave, BearingStepping):
 
     @staticmethod
     def _fmu_state_from_bytes(state):
-        try:
-            return Fmi3Slave._fmu_state_from_bytes(state)
-        except Exception as err:  # no exception may reach pythonfmu3's C++ side
-            return {_INVALID_STATE: f"fmi3DeserializeFMUState: not a serialized BallBearing3 state ({err!r})"}
+        return state_from_bytes(Fmi3Slave._fmu_state_from_bytes, state,
+                                "fmi3DeserializeFMUState: not a serialized BallBearing3 state")
 
     def _set_fmu_state(self, state):
         """Check the whole state (names, types, parameters, array size, life sums) before assigning any of it."""
         try:
-            message = state.get(_INVALID_STATE) if isinstance(state, dict) else "not a BallBearing3 state"
+            message = state.get(INVALID_STATE) if isinstance(state, dict) else "not a BallBearing3 state"
             if message is None:
                 values, bearing, accumulator = self._check_state(state)
         except Exception as err:
@@ -424,6 +417,10 @@ class BallBearing3(Fmi3Slave, BearingStepping):
                 values[v.name] = [float(x) for x in state[v.name]]
             else:
                 values[v.name] = convert[self._kind[vr]](state[v.name])
+        not_finite = [name for name, value in values.items() if name not in _LIFE_NAMES   # a life may be inf
+                      and not all(map(math.isfinite, value if isinstance(value, list) else [value]))]
+        if not_finite:   # JSON carries NaN and Infinity: never restore one into an input, output or parameter
+            raise ValueError(f"{not_finite[0]} = {values[not_finite[0]]!r} is not finite")
         params = BearingParameters(**{name: values[name] for name in self._param_names})
         bearing = accumulator = None
         if state[_INITIALISED]:

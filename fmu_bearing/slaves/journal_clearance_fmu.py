@@ -33,9 +33,10 @@ from fmu_bearing import clearance_joint as physics
 from fmu_bearing.ball_bearing import BearingInputError
 from fmu_bearing.clearance_joint import ClearanceParameters, ContactState
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
-from fmu_bearing.slaves import (HostLogger, add_initial_unknowns, add_unit_definitions, guard_pythonfmu_exit,
-                                hold_before_raise, release_on_free, weak_accessors)
-from fmu_bearing.slaves.ball_bearing_fmu import _INVALID_STATE, BooleanVariable, RealVariable
+from fmu_bearing.slaves import (INVALID_STATE, HostLogger, add_initial_unknowns, add_unit_definitions,
+                                guard_pythonfmu_exit, hold_before_raise, refuse_state, release_on_free,
+                                state_from_bytes, weak_accessors)
+from fmu_bearing.slaves.ball_bearing_fmu import BooleanVariable, RealVariable
 from fmu_bearing.slaves.state import check_state, variable_kinds
 
 #: (name, unit, description) of the inputs, in value-reference order: those of the BallBearing FMU
@@ -207,17 +208,14 @@ class JournalClearance(Fmi2Slave):
     # --- FMU state: pythonfmu saves every registered variable (inputs, outputs incl. the contact state, parameters)
     @staticmethod
     def _fmu_state_from_bytes(state):
-        try:
-            return Fmi2Slave._fmu_state_from_bytes(state)
-        except Exception as err:  # no exception may reach pythonfmu's C++ side
-            return {_INVALID_STATE: f"not a serialized JournalClearance state ({err!r})"}
+        return state_from_bytes(Fmi2Slave._fmu_state_from_bytes, state, "not a serialized JournalClearance state")
 
     def _set_fmu_state(self, state):
         """Restore a state after checking all of it (``fmu_bearing.slaves.state``); a state that is not ours
         is refused with a logged error, the next doStep is refused, and nothing is assigned."""
         try:
-            if isinstance(state, dict) and _INVALID_STATE in state:
-                problem = str(state[_INVALID_STATE])
+            if isinstance(state, dict) and INVALID_STATE in state:
+                problem = str(state[INVALID_STATE])
             else:
                 fixed = {n: getattr(self, n) for n in self._param_names} if self._joint is not None else None
                 problem = check_state(state, variable_kinds(self), "JournalClearance", fixed)
@@ -226,9 +224,7 @@ class JournalClearance(Fmi2Slave):
         except Exception as err:  # no exception may reach pythonfmu's C++ side
             problem = f"not a JournalClearance state ({err!r})"
         if problem is not None:
-            message = f"setFMUstate refused: {problem}; the instance is unchanged"
-            self._error(message)
-            self._pending_error = self._pending_error or message
+            refuse_state(self, problem)
             return
         for var in self.vars.values():
             if var.setter is not None:

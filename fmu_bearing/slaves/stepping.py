@@ -16,9 +16,11 @@ added to it after each good step (held over the step); ``_publish_ratings`` copi
 the FMU state under ``LIFE_STATE`` (``_life_state``; ``_restored_life`` checks them before any assignment).
 """
 import math
+from dataclasses import fields
 
 from fmu_bearing import ball_bearing as physics
 from fmu_bearing import life
+from fmu_bearing.parameters import BearingParameters
 
 #: key of the life accumulator's sums (LifeAccumulator.state()) in a saved FMU state
 LIFE_STATE = "__life_accumulator__"
@@ -38,13 +40,22 @@ class BearingStepping:
 
     #: the FMI call that set ``_terminated`` (named in the refusal of a later step)
     TERMINATE_CALL = "fmi2Terminate"
+    #: defaults of a slave without an accumulator / not terminated (the slaves set both per instance)
+    _life = None
+    _terminated = False
+    #: the parameter variables: one per BearingParameters field, same name
+    _param_names = tuple(f.name for f in fields(BearingParameters))
+
+    def parameters(self) -> BearingParameters:
+        """The current parameter values as BearingParameters."""
+        return BearingParameters(**{name: getattr(self, name) for name in self._param_names})
 
     def _advance(self, step_size):
         """Advance over one step of ``step_size`` [s]; None, or why the step is refused (outputs unchanged)."""
         bearing = self._bearing
         if bearing is None or self._pending_error is not None:
             reason = self._pending_error or (f"the instance was terminated ({self.TERMINATE_CALL})"
-                                             if getattr(self, "_terminated", False) else "the instance is not initialised")
+                                             if self._terminated else "the instance is not initialised")
             self._pending_error = None
             return reason
         w_i, w_o = self.omega_inner, self.omega_outer
@@ -55,10 +66,11 @@ class BearingStepping:
         if not step_size >= 0.0:
             return f"step size {step_size!r} is not >= 0"
         reason = self._evaluate(bearing.advance_cage(self.cage_angle, w_i, w_o, step_size), bearing)
-        if reason is not None or getattr(self, "_life", None) is None:
+        accumulator = self._life
+        if reason is not None or accumulator is None:
             return reason
         try:  # the loads at the end of the step, held over it (docs/bearing-life.md)
-            self._life.add(self._loads, w_i, w_o, step_size)
+            accumulator.add(self._loads, w_i, w_o, step_size)
         except Exception as err:  # never let an exception reach pythonfmu's C++ side
             return f"life accumulation failed: {err!r}"
         return None
