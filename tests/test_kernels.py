@@ -256,7 +256,7 @@ def test_adaptive_driver_on_kernels_reproduces_the_numpy_master():
     assert np.allclose(got.data[:, k], ref.data[:, k], rtol=0, atol=1e-9 * np.max(np.abs(ref.data[:, k])))
 
 
-def test_ideal_counterpart_at_the_coarse_step_resamples_to_1e_9():
+def test_ideal_counterpart_at_the_coarse_step_resamples_to_1e_6():
     """``run``'s ideal counterpart at 1e-4 s, resampled by cubic splines, against RK4 at 1e-5 s."""
     fine = _slider_crank_run(None, kernels=True, t_end=0.02, step=1e-5)
     coarse = resample(_slider_crank_run(None, kernels=True, t_end=0.02, step=1e-4), fine["time"])
@@ -282,3 +282,27 @@ def test_kernel_redundant_constraints_give_the_numpy_accelerations():
     assert _rel(qdd, ref_qdd) <= 1e-10
     J = system.jacobian(q)
     assert np.allclose(J.T @ lam, J.T @ ref_lam, rtol=1e-10, atol=1e-10 * np.max(np.abs(J.T @ ref_lam)))
+
+
+@pytest.mark.parametrize("settings", [{}, {"n_balls": 20, "allow_ball_overlap": True}])
+def test_compiled_elastic_energy_matches_ball_bearing_and_is_the_hertz_potential(settings):
+    """``law_kernel.elastic_energy`` (the energy account's V) equals ``BallBearing.elastic_energy`` to
+    1e-12, and its gradient in e (central differences) is the law's elastic force (eq. 18-19 at v = 0)."""
+    bearing = BallBearing(BearingParameters(**settings))
+    P = law_kernel.pack_bearing(bearing)
+    out, loads = np.empty(10), np.empty(bearing.n_balls)
+    rng = np.random.default_rng(12)
+    loaded = 0
+    for _ in range(200):
+        ex, ey, cage = *rng.uniform(-4e-5, 4e-5, 2), rng.uniform(-7, 7)
+        ref = bearing.elastic_energy(ex, ey, cage)
+        got = law_kernel.elastic_energy(P, ex, ey, cage)
+        assert abs(got - ref) <= 1e-12 * max(ref, 1e-30)
+        law_kernel.evaluate(P, ex, ey, 0.0, 0.0, cage, 0.0, 0.0, out, loads)
+        d = 1e-11
+        grad = [(law_kernel.elastic_energy(P, ex + d, ey, cage) - law_kernel.elastic_energy(P, ex - d, ey, cage)) / (2 * d),
+                (law_kernel.elastic_energy(P, ex, ey + d, cage) - law_kernel.elastic_energy(P, ex, ey - d, cage)) / (2 * d)]
+        scale = max(1.0, abs(out[0]), abs(out[1]))
+        assert np.allclose(grad, out[:2], rtol=0, atol=1e-4 * scale), (grad, out[:2])   # F = dV/de
+        loaded += ref > 0
+    assert loaded > 50

@@ -31,6 +31,7 @@ angles): the law's truth along the trajectory, independent of how the component 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 
@@ -63,40 +64,43 @@ class EnergyAccount:
         return float(self.bearing.params.cage_angle_start
                      + self.bearing.cage_velocity(aj - self._angles0[0], ai - self._angles0[1]))
 
-    def _forces(self, ex, ey, vx, vy, cage, wi, wo) -> tuple[float, float, float, float]:
-        """(F_x, F_y) of the law and (F_x, F_y) at v = 0 (the elastic part), through the compiled law
-        (``law_kernel``, held to 1e-12 against ``BallBearing.evaluate``) when numba is there."""
+    def _forces(self, ex, ey, vx, vy, cage, wi, wo) -> tuple[float, float, float, float, float]:
+        """(F_x, F_y) of the law, (F_x, F_y) at v = 0 (the elastic part) and the contact energy V [J],
+        through the compiled law (``law_kernel``, held to 1e-12 against ``BallBearing``) when numba is there."""
         if self._kernel is None:
             try:
                 from mechanism.cosim import law_kernel
-                self._kernel = (law_kernel.evaluate, law_kernel.pack_bearing(self.bearing), np.zeros(10),
-                                np.zeros(self.bearing.n_balls))
+                self._kernel = (law_kernel.evaluate, law_kernel.elastic_energy, law_kernel.pack_bearing(self.bearing),
+                                np.zeros(10), np.zeros(self.bearing.n_balls))
             except ImportError:
                 self._kernel = False
         if self._kernel:
-            evaluate, P, out, loads = self._kernel
+            evaluate, energy, P, out, loads = self._kernel
             evaluate(P, ex, ey, vx, vy, cage, wi, wo, out, loads)
             fx, fy = float(out[0]), float(out[1])
             evaluate(P, ex, ey, 0.0, 0.0, cage, wi, wo, out, loads)
-            return fx, fy, float(out[0]), float(out[1])
+            return fx, fy, float(out[0]), float(out[1]), energy(P, ex, ey, cage)
         law = self.bearing.evaluate(ex, ey, vx, vy, cage, wi, wo)
         elastic = self.bearing.evaluate(ex, ey, 0.0, 0.0, cage, wi, wo)
-        return law.F_x, law.F_y, elastic.F_x, elastic.F_y
+        return law.F_x, law.F_y, elastic.F_x, elastic.F_y, self.bearing.elastic_energy(ex, ey, cage)
 
-    def update(self, t: float, q: np.ndarray, qd: np.ndarray, lam: np.ndarray) -> dict[str, float]:
-        """Account up to time t [s] for the state (q, qd) and the multipliers lam of eq. (9) (model order)."""
+    def update(self, t: float, q: np.ndarray, qd: np.ndarray, lam: np.ndarray, inputs: Sequence[float] | None = None,
+               kinetic: float | None = None) -> dict[str, float]:
+        """Account up to time t [s] for the state (q, qd) and the multipliers lam of eq. (9) (model order).
+
+        ``inputs`` (the link's (e, v, omega) at (q, qd)) and ``kinetic`` (T at qd) when the caller has them."""
         if self._last is None:
             self._angles0 = self.link.ring_angles(q)
-        ex, ey, vx, vy, wi, wo = self.link.inputs(q, qd)
+        ex, ey, vx, vy, wi, wo = self.link.inputs(q, qd) if inputs is None else inputs
         cage = self.cage_angle(q)
-        fx, fy, el_x, el_y = self._forces(ex, ey, vx, vy, cage, wi, wo)
+        fx, fy, el_x, el_y, potential = self._forces(ex, ey, vx, vy, cage, wi, wo)
         system = self.system
         powers = ((fx - el_x) * vx + (fy - el_y) * vy,                                           # damping
                   float(np.dot(lam, system.phi_t(t))) if system.m else 0.0,                   # drivers
                   self.bearing.cage_velocity(wi, wo) * (el_x * ey - el_y * ex),                # cage
                   float(np.dot(system.applied_forces(q, qd, t), qd)))                          # applied
-        kinetic = system.kinetic_energy(qd)
-        potential = self.bearing.elastic_energy(ex, ey, cage)
+        if kinetic is None:
+            kinetic = system.kinetic_energy(qd)
         if self._last is None:
             self._start = kinetic + potential
         else:

@@ -112,3 +112,18 @@ def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, l
     out[7] = s2 * cc + 2.0 * cs2 * cs_ + c2 * ss
     out[8] = n_loaded
     out[9] = f_max
+
+
+@njit(cache=True)
+def elastic_energy(P, e_x, e_y, cage_angle):
+    """Strain energy of the loaded contacts, sum of (2/5) K delta_r^2.5 [J]: ``BallBearing.elastic_energy``
+    (the integral of eq. 18's Hertz term) with the same arithmetic (ball angles of eq. 17)."""
+    nb = int(P[0])
+    K, half = P[1], P[2]
+    total = 0.0
+    for r in range(nb):
+        phi = cage_angle + 2.0 * math.pi * r / nb
+        delta = e_x * math.cos(phi) + e_y * math.sin(phi) - half
+        if delta > 0:
+            total += 0.4 * K * delta ** 2.5
+    return total

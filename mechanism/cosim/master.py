@@ -220,7 +220,8 @@ class CouplingLoop:
             for name, value in self.observe(y[:n], y[n:], self._dy[n:], self._lam, t).items():
                 row[rec.index[name]] = value
         if self.energy is not None and self.link is not None:
-            for name, value in self.energy.update(t, y[:n], y[n:], self._lam).items():
+            for name, value in self.energy.update(t, y[:n], y[n:], self._lam, self._u.tolist(),
+                                                  row[rec.index["kinetic_energy"]]).items():
                 row[rec.index[name]] = value
         if self.sent_ring_speeds is not None:     # the ring speeds the component was given (secant schemes)
             row[rec.index["omega_inner"]], row[rec.index["omega_outer"]] = self.sent_ring_speeds
@@ -346,8 +347,6 @@ class CouplingLoop:
             for passes in range(1, limit + 1):
                 y_end = self.advance(y, t0, h, step, t)
                 end = scheme.past[-1]
-                jumps = () if energy is None else onset_jumps(energy.bearing, start, cage_start, end,
-                                                              energy.cage_angle(y_end[:n]))
                 if previous is not None and scheme.converged(
                         previous, end, self.settings.iteration_tol, max(1e-6, math.hypot(end.e_x, end.e_y))):
                     break
@@ -355,6 +354,8 @@ class CouplingLoop:
                     stats["not_converged"] += 1
                     break
                 previous = end
+                jumps = () if energy is None else onset_jumps(energy.bearing, start, cage_start, end,
+                                                              energy.cage_angle(y_end[:n]))
                 self.restore(snap)
                 scheme.set_trial(end, jumps)
         finally:
@@ -398,7 +399,7 @@ class CouplingLoop:
         row["constraint_violation"] = float(np.max(np.abs(system.phi(q, t)))) if system.m else 0.0
         row["kinetic_energy"] = system.kinetic_energy(qd)
         if self.energy is not None:
-            row.update(self.energy.update(t, q, qd, lam))
+            row.update(self.energy.update(t, q, qd, lam, self.inputs, row["kinetic_energy"]))
         if self.sent_ring_speeds is not None:     # the ring speeds the component was given (secant schemes)
             row["omega_inner"], row["omega_outer"] = self.sent_ring_speeds
         return row

@@ -83,7 +83,7 @@ def run_monolithic(system: System, link: BearingLink, bearing: BallBearing, q0: 
                    constraint_violation=float(np.max(np.abs(system.phi(q, t)))),
                    kinetic_energy=system.kinetic_energy(qd))
         row.update({f"ball_load_{r + 1}": loads[r] for r in range(nb)})
-        row.update(energy.update(t, q, qd, lam))
+        row.update(energy.update(t, q, qd, lam, (ex, ey, vx, vy, wi, wo), row["kinetic_energy"]))
         rec.add(row)
 
     y0 = np.concatenate((q0, qd0, [bearing.params.cage_angle_start])).astype(float)

@@ -49,11 +49,15 @@ from .jacobian import InterfaceJacobianDrift, _linear
 Jump = tuple[float, float, float]
 
 
-def ball_deflections(bearing: BallBearing, e_x: float, e_y: float, cage_angle: float) -> list[float]:
+def ball_deflections(bearing: BallBearing, e_x: float, e_y: float, cage_angle: float,
+                     angles: list[float] | None = None) -> list[float]:
     """delta_r = e . u_r - P_d/2 [m] of every ball (eq. 18's bracket; u_r at the ball angles of eq. 17):
-    > 0 in the load zone. Used to locate contact onsets (here and in ``mechanism.cosim.monolithic``)."""
+    > 0 in the load zone. Used to locate contact onsets (here and in ``mechanism.cosim.monolithic``).
+    ``angles``: ``bearing.ball_angles(cage_angle)`` when the caller has them already."""
     half = bearing.half_clearance
-    return [e_x * math.cos(p) + e_y * math.sin(p) - half for p in bearing.ball_angles(cage_angle)]
+    if angles is None:
+        angles = bearing.ball_angles(cage_angle)
+    return [e_x * math.cos(p) + e_y * math.sin(p) - half for p in angles]
 
 
 def onset_jumps(bearing: BallBearing, a: Exchanged, cage_a: float, b: Exchanged, cage_b: float) -> list[Jump]:
@@ -69,9 +73,9 @@ def onset_jumps(bearing: BallBearing, a: Exchanged, cage_a: float, b: Exchanged,
         return []
     C = bearing.damping_coefficient
     jumps = []
-    for pa, pb, da, db in zip(bearing.ball_angles(cage_a), bearing.ball_angles(cage_b),
-                              ball_deflections(bearing, a.e_x, a.e_y, cage_a),
-                              ball_deflections(bearing, b.e_x, b.e_y, cage_b)):
+    angles_a, angles_b = bearing.ball_angles(cage_a), bearing.ball_angles(cage_b)
+    for pa, pb, da, db in zip(angles_a, angles_b, ball_deflections(bearing, a.e_x, a.e_y, cage_a, angles_a),
+                              ball_deflections(bearing, b.e_x, b.e_y, cage_b, angles_b)):
         if (da > 0.0) == (db > 0.0):
             continue
         theta = da / (da - db)
