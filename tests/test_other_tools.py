@@ -121,7 +121,7 @@ def test_fmpy_ssp_is_the_jacobi_loop_started_from_zero_connectors(results, ssp_a
 
 @pytest.mark.parametrize("tool", ssp_tools.TOOLS)
 def test_tools_agree_with_our_master_on_the_same_ssp(results, tool):
-    """Jacobi (tools) vs Gauss-Seidel jacobian-drift (our master): the force lags one more step in
+    """Jacobi (tools) vs our master's default Gauss-Seidel scheme (iterated jacobian-implicit): the force lags in
     Jacobi, so the contact oscillation is slightly out of phase: the peaks agree to a few per cent,
     the pointwise deviation is larger, the slider position to 2e-5."""
     _need(tool)
