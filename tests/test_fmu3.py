@@ -410,6 +410,43 @@ def test_non_finite_values_in_a_state_are_refused_before_anything_is_assigned(fm
         s.free()
 
 
+def test_state_values_of_the_wrong_type_or_of_another_instance_are_refused(fmu3):
+    """Nothing in a serialized state is converted (issue 14: the state is checked completely): a string in a
+    Float64, a fraction in an Int32 or the UInt64 n_balls, a number in a Boolean, an unknown key, a state with
+    another n_balls (which sizes ball_loads) or, once initialised, other parameter values is refused; nothing
+    is assigned, the message names the variable, and the next doStep is refused."""
+    rng = np.random.default_rng(7)
+    s = Slave3(fmu3, {}, random_inputs(rng))
+    try:
+        saved = saved_state_then_a_step(s, rng)
+        now, life_now = s.outputs(), life3(s)
+        n = saved["n_balls"]
+        cases = (("e_x", {"e_x": str(saved["e_x"])}),
+                 ("damping_model", {"damping_model": 1.7}),
+                 ("damping_model", {"damping_model": float(saved["damping_model"])}),
+                 ("n_balls", {"n_balls": float(n)}),
+                 ("allow_ball_overlap", {"allow_ball_overlap": 0}),
+                 ("F_x", {"F_x": True}),
+                 ("injected", {"injected": 1.0}),
+                 ("n_balls", {"n_balls": n + 1, "ball_loads": saved["ball_loads"] + [0.0]}),
+                 ("ball_loads", {"ball_loads": saved["ball_loads"][:-1]}),
+                 ("ball_loads", {"ball_loads": [-1.0] * n}),
+                 ("damping_coefficient", {"damping_coefficient": saved["damping_coefficient"] * 2.0}))
+        for name, change in cases:
+            set_serialized_state(s, dict(saved, **change))
+            assert s.outputs() == now and life3(s) == life_now, name
+            assert name in s.messages[-1][2], (name, s.messages[-1])
+            with pytest.raises(FMICallException) as err:
+                s.s.doStep(2e-5, 1e-5)
+            assert err.value.status == DISCARD
+            assert s.outputs() == now and life3(s) == life_now, name
+        set_serialized_state(s, saved)        # the state itself is still accepted, and restores the outputs
+        assert s.outputs() != now
+        s.s.doStep(2e-5, 1e-5)
+    finally:
+        s.free()
+
+
 # --- errors: a status and a message, never a crash ---------------------------------------------
 
 def test_refused_step_keeps_the_last_good_outputs(fmu3):

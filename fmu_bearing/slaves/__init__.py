@@ -339,7 +339,7 @@ def hold_before_raise(slave) -> None:
 
 
 def guard_pythonfmu_exit(resources) -> None:
-    """Release pythonfmu's Python-state object from an ``atexit`` hook (once per FMU binary).
+    """Release pythonfmu's (or pythonfmu3's) Python-state object from an ``atexit`` hook (once per FMU binary).
 
     Only in a Python host whose main thread drives the FMU: Python then belongs to the host, and the
     pythonfmu worker thread that ``finalizePythonInterpreter`` joins has already returned. In native hosts
@@ -349,10 +349,11 @@ def guard_pythonfmu_exit(resources) -> None:
         return
     if threading.current_thread() is not threading.main_thread():
         return
-    binaries = os.path.join(os.path.dirname(os.path.normpath(str(resources))), "binaries", "linux64")
+    root = os.path.join(os.path.dirname(os.path.normpath(str(resources))), "binaries")
+    binaries = os.path.join(root, "linux64")   # FMI 2.0's platform folder; FMI 3.0's is x86_64-linux
     if glob.glob(os.path.join(binaries, "*_pythonfmu.so")):
         return  # the FMU's binary is the loader (fmu_bearing/native): it finalises at exit itself
-    for path in glob.glob(os.path.join(binaries, "*.so")):
+    for path in glob.glob(os.path.join(binaries, "*.so")) + glob.glob(os.path.join(root, "x86_64-linux", "*.so")):
         if path in _EXIT_GUARDED:
             continue
         _EXIT_GUARDED.add(path)

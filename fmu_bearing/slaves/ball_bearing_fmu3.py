@@ -50,9 +50,10 @@ try:
     from fmu_bearing import ball_bearing as physics
     from fmu_bearing import life
     from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
-    from fmu_bearing.parameters import BearingParameters
-    from fmu_bearing.slaves import (INVALID_STATE, UNIT_DEFINITIONS, hold_before_raise, release_on_free,
-                                    state_from_bytes, weak_accessors)
+    from fmu_bearing.parameters import BearingParameters, validate
+    from fmu_bearing.slaves import (INVALID_STATE, UNIT_DEFINITIONS, guard_pythonfmu_exit, hold_before_raise,
+                                    release_on_free, state_from_bytes, weak_accessors)
+    from fmu_bearing.slaves.state import check_state
     from fmu_bearing.slaves.stepping import LIFE_STATE, BearingStepping, ignore_value, life_output
     _IMPORT_ERROR = None
 except Exception as _err:  # noqa: BLE001 - reported at instantiation
@@ -154,6 +155,7 @@ class BallBearing3(Fmi3Slave, BearingStepping):
                               f"(Python {sys.version.split()[0]} at {sys.executable})")
         super().__init__(**kwargs)
         release_on_free(self)   # the last fmi3FreeInstance removes the sealed modules and the sys.path entry
+        guard_pythonfmu_exit(self.resources)   # pythonfmu3's binary double-frees its state object at exit
         self.author = "bearing-cosim contributors"
         self.description = ("Deep-groove ball bearing with radial clearance (Xu et al., Mech. Mach. Theory 56, "
                             "2012): force on the housing from the journal eccentricity, per-ball Hertz contact "
@@ -407,21 +409,35 @@ class BallBearing3(Fmi3Slave, BearingStepping):
                      (Fmi3Causality.parameter, Fmi3Causality.structuralParameter)}
 
     def _check_state(self, state):
-        convert = {"Float64": float, "Int32": int, "UInt64": int, "Boolean": bool}
-        missing = [v.name for v in self.vars.values() if v.name not in state]
-        if missing or _INITIALISED not in state:
-            raise ValueError(f"missing variables {missing or [_INITIALISED]}")
-        values = {}
-        for vr, v in self.vars.items():
-            if vr == self._loads_vr:
-                values[v.name] = [float(x) for x in state[v.name]]
-            else:
-                values[v.name] = convert[self._kind[vr]](state[v.name])
-        not_finite = [name for name, value in values.items() if name not in _LIFE_NAMES   # a life may be inf
-                      and not all(map(math.isfinite, value if isinstance(value, list) else [value]))]
-        if not_finite:   # JSON carries NaN and Infinity: never restore one into an input, output or parameter
-            raise ValueError(f"{not_finite[0]} = {values[not_finite[0]]!r} is not finite")
+        """(values to assign, bearing, accumulator) of a state that is completely this instance's, else raise
+        ValueError naming the first problem. Nothing is converted: a value of the wrong type (a string, a
+        float in an Int32 or UInt64, a number in a Boolean) is refused, as are unknown keys, NaN and
+        infinity (JSON carries both; a life output may be infinite), another ``n_balls`` (it sizes
+        ``ball_loads``: a state of another instance), and, once initialised, other parameter values."""
+        kinds = {v.name: "Real or inf" if v.name in _LIFE_NAMES else _STATE_KINDS[self._kind[vr]]
+                 for vr, v in self.vars.items() if vr != self._loads_vr}
+        fixed = {"n_balls": self.n_balls}
+        if self._bearing is not None:   # parameters are fixed once initialised: they must be this instance's
+            fixed.update((name, getattr(self, name)) for name in self._param_names)
+        problem = check_state(state, kinds, "BallBearing3", fixed, extra=(BALL_LOADS[0], _INITIALISED, LIFE_STATE))
+        if problem is None and type(state.get(_INITIALISED)) is not bool:
+            problem = f"not a BallBearing3 state of this build: no Boolean {_INITIALISED!r}"
+        loads = state.get(BALL_LOADS[0]) if problem is None else None
+        if problem is None and not (isinstance(loads, list) and len(loads) == self.n_balls):
+            problem = f"ball_loads = {loads!r} is not a list of n_balls = {self.n_balls} values"
+        if problem is None:
+            bad = [x for x in loads if type(x) not in (int, float) or not math.isfinite(x) or x < 0.0]
+            if bad:
+                problem = f"ball_loads holds {bad[0]!r}: " + ("not finite" if type(bad[0]) in (int, float)
+                                                               and not math.isfinite(bad[0]) else
+                                                               "not a load >= 0 N")
+        if problem is not None:
+            raise ValueError(problem)
+        values = {name: float(state[name]) if kind.startswith("Real") else state[name]
+                  for name, kind in kinds.items()}
+        values[BALL_LOADS[0]] = [float(x) for x in loads]
         params = BearingParameters(**{name: values[name] for name in self._param_names})
+        validate(params, MAX_BALLS)
         bearing = accumulator = None
         if state[_INITIALISED]:
             bearing = (self._bearing if self._bearing is not None and self._bearing.params == params
@@ -432,5 +448,7 @@ class BallBearing3(Fmi3Slave, BearingStepping):
         return values, bearing, accumulator
 
 
+#: FMI 3.0 type -> the kind ``fmu_bearing.slaves.state.check_state`` checks a saved value against
+_STATE_KINDS = {"Float64": "Real", "Int32": "Integer", "UInt64": "Integer", "Boolean": "Boolean"}
 _LIFE_NAMES = frozenset(name for name, _, _, _ in life.LIFE_OUTPUTS) if _IMPORT_ERROR is None else frozenset()
 _TYPES = {"Float64": Float64, "Int32": Int32, "UInt64": UInt64, "Boolean": Boolean}

@@ -11,8 +11,6 @@ Standard library only (this module runs inside the FMU).
 """
 import math
 
-from pythonfmu import Boolean, Integer, Real, String
-
 #: FMI 2.0 Integer range (fmi2Integer is a C int)
 INT_MIN, INT_MAX = -2**31, 2**31 - 1
 
@@ -20,6 +18,7 @@ INT_MIN, INT_MAX = -2**31, 2**31 - 1
 def variable_kinds(slave) -> dict:
     """{name: "Real" | "Integer" | "Boolean" | "String"} of the slave's registered variables ("Real" must be
     finite; a slave marks a Real that may be infinite, e.g. a life without load, as "Real or inf")."""
+    from pythonfmu import Boolean, Integer, Real, String   # FMI 2.0 slaves only (the FMI 3.0 one has its own)
     kinds = {}
     for var in slave.vars.values():
         for cls, kind in ((Real, "Real"), (Integer, "Integer"), (Boolean, "Boolean"), (String, "String")):
@@ -30,12 +29,11 @@ def variable_kinds(slave) -> dict:
 
 
 def _value_problem(name: str, kind: str, value):
-    if kind == "Real or inf":
-        if type(value) not in (int, float) or math.isnan(value):
+    if kind in ("Real", "Real or inf"):
+        if type(value) not in (int, float):
             return f"{name} = {value!r} is not a Real"
-    elif kind == "Real":
-        if type(value) not in (int, float) or not math.isfinite(value):
-            return f"{name} = {value!r} is not a finite Real"
+        if math.isnan(value) or kind == "Real" and not math.isfinite(value):
+            return f"{name} = {value!r} is not finite"
     elif kind == "Integer":
         if type(value) is not int or not INT_MIN <= value <= INT_MAX:
             return f"{name} = {value!r} is not an Integer"
