@@ -43,6 +43,8 @@ class BearingStepping:
     #: defaults of a slave without an accumulator / not terminated (the slaves set both per instance)
     _life = None
     _terminated = False
+    #: the BearingForce of the last good evaluation (the outputs F_x ... max_ball_load), None before one
+    _force = None
     #: the parameter variables: one per BearingParameters field, same name
     _param_names = tuple(f.name for f in fields(BearingParameters))
 
@@ -88,6 +90,7 @@ class BearingStepping:
          self.damping_xx, self.damping_xy, self.damping_yy, self.loaded_balls, self.max_ball_load) = r
         self.cage_angle = cage_angle
         self._loads[:] = self._scratch
+        self._force = r
         return None
 
     @staticmethod
