@@ -12,6 +12,11 @@ ctypes function pointers (no fmpy wrapper). The breakdown times each call alone 
 Python code called directly, so the rest is pythonfmu's C++ layer plus ctypes. Every figure is the
 median over ``--repeat`` runs of ``--calls`` calls, in microseconds per call.
 
+For scale (the machine may be busy: compare figures of one run), the same fmpy loops are timed with a
+trivial compiled FMU (``TRIVIAL_FMU`` below, compiled with zig cc: fmi2SetReal copies, fmi2DoStep adds,
+fmi2GetReal copies): what fmpy and ctypes cost a host without any model, and its native-host cycle is the
+floor of the C host's. The ratios printed at the end use those figures.
+
 The native-host cycle is the same exchange from the C host ``fmu_bearing/native/host.c`` (a separate,
 non-Python process, clean environment; timed inside the host), through the FMU's loader; and, for
 comparison, through pythonfmu's binary alone with libpython preloaded (how a native host had to run the
@@ -37,6 +42,9 @@ from fmu_bearing.parameters import BearingParameters  # noqa: E402
 INPUTS = ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")
 TARGET_IN_PROCESS_US, TARGET_EXCHANGE_US = 10.0, 25.0
 TARGET_NATIVE_US, TARGET_FMPY_US = 10.0, 7.5
+#: the issue's reference: a trivial compiled FMU costs about 2 us per cycle through fmpy (prebuilt arrays)
+TRIVIAL_REFERENCE_US = 2.0
+TRIVIAL_KEY = "exchange, fmpy fmi2* prebuilt, trivial compiled FMU (no model)"
 
 
 def states(n=64):
@@ -88,6 +96,66 @@ def native_cycles(fmu_path: Path, tmp: Path, calls: int, repeat: int) -> dict:
                 raise RuntimeError(f"{name}: host failed ({run.returncode}): {run.stderr[-2000:]}")
             runs[name].append(run.cycle_us)
     return {name: statistics.median(times) for name, times in runs.items()}
+
+
+#: a trivial FMI 2.0 co-simulation library (the exchange costs of fmpy and ctypes, without any model)
+TRIVIAL_FMU = r"""
+#include <stdlib.h>
+#include <string.h>
+#define EXPORT __attribute__((visibility("default")))
+typedef struct { double x[16]; } M;
+EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
+EXPORT const char *fmi2GetVersion(void) { return "2.0"; }
+EXPORT void *fmi2Instantiate(const char *n, int t, const char *g, const char *r, const void *f, int v, int l) {
+    return calloc(1, sizeof(M));
+}
+EXPORT void fmi2FreeInstance(void *c) { free(c); }
+EXPORT int fmi2SetupExperiment(void *c, int a, double b, double d, int e, double f) { return 0; }
+EXPORT int fmi2EnterInitializationMode(void *c) { return 0; }
+EXPORT int fmi2ExitInitializationMode(void *c) { return 0; }
+EXPORT int fmi2Terminate(void *c) { return 0; }
+EXPORT int fmi2SetReal(void *c, const unsigned *vr, size_t n, const double *v) {
+    for (size_t i = 0; i < n; i++) ((M *)c)->x[vr[i] & 15] = v[i];
+    return 0;
+}
+EXPORT int fmi2GetReal(void *c, const unsigned *vr, size_t n, double *v) {
+    for (size_t i = 0; i < n; i++) v[i] = ((M *)c)->x[vr[i] & 15];
+    return 0;
+}
+EXPORT int fmi2DoStep(void *c, double t, double h, int s) {
+    M *m = (M *)c;
+    m->x[6] = m->x[0] + m->x[1];
+    m->x[7] = m->x[2] + m->x[3] + m->x[4] + m->x[5];
+    return 0;
+}
+"""
+
+
+def trivial_fmu(tmp: Path):
+    """An fmpy FMU2Slave of the trivial library (compiled here), or None without zig."""
+    import subprocess
+
+    from fmpy.fmi2 import FMU2Slave
+
+    from fmu_bearing.native.build import LoaderBuildError, zig_cc
+    folder = tmp / "trivial"
+    binaries = folder / "binaries" / "linux64"
+    binaries.mkdir(parents=True)
+    (tmp / "trivial.c").write_text(TRIVIAL_FMU, encoding="utf-8")
+    try:
+        proc = subprocess.run([*zig_cc(), "-shared", "-fPIC", "-O2", "-o", str(binaries / "Trivial.so"),
+                               str(tmp / "trivial.c")], capture_output=True, text=True)
+    except LoaderBuildError:
+        return None
+    if proc.returncode != 0:
+        return None
+    fmu = FMU2Slave(guid="trivial", unzipDirectory=str(folder), modelIdentifier="Trivial", instanceName="trivial",
+                    requireFunctions=False)
+    fmu.instantiate(loggingOn=False)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    return fmu
 
 
 def find_fmu(path: str | None, tmp: Path) -> Path:
@@ -162,6 +230,17 @@ def main(argv=None) -> int:
                 p_get(p_comp, vr_out, 2, val_out)
                 val_out[0], val_out[1]
 
+        trivial = trivial_fmu(Path(tmp))
+
+        def trivial_prebuilt(n):
+            t_set, t_step, t_get, t_comp = trivial.fmi2SetReal, trivial.fmi2DoStep, trivial.fmi2GetReal, trivial.component
+            for i in range(n):
+                val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
+                t_set(t_comp, vr_in, 6, val_in)
+                t_step(t_comp, i * h, h, 1)
+                t_get(t_comp, vr_out, 2, val_out)
+                val_out[0], val_out[1]
+
         def fmpy_convenience(n):
             for i in range(n):
                 fmu.setReal(in_vrs, S[i % nS])
@@ -221,8 +300,10 @@ def main(argv=None) -> int:
         c, r = args.calls, args.repeat
         plain = {"exchange, fmpy fmi2* prebuilt, pythonfmu binary alone (no loader)": fmpy_prebuilt_plain} \
             if plain_fmu is not None else {}
+        trivial_case = {TRIVIAL_KEY: trivial_prebuilt} if trivial is not None else {}
         results = medians_us({
             "exchange, fmpy setReal/doStep/getReal": fmpy_convenience,
+            **trivial_case,
             "exchange, fmpy fmi2* with prebuilt ctypes arrays": fmpy_prebuilt,
             **plain,
             "exchange, raw ctypes function pointers": raw_ctypes,
@@ -235,6 +316,9 @@ def main(argv=None) -> int:
         }, c, r)
         fmu.terminate()
         fmu.freeInstance()
+        if trivial is not None:
+            trivial.terminate()
+            trivial.freeInstance()
         if plain_fmu is not None:
             plain_fmu.terminate()
             plain_fmu.freeInstance()
@@ -248,6 +332,14 @@ def main(argv=None) -> int:
     exchange = results["exchange, fmpy fmi2* with prebuilt ctypes arrays"]
     in_process = results["in-process evaluate, 8 balls"]
     print(f"  ratio exchange (prebuilt arrays) / in-process evaluate (8 balls): {exchange / in_process:.1f}")
+    plain_fmpy = results.get("exchange, fmpy fmi2* prebuilt, pythonfmu binary alone (no loader)")
+    if plain_fmpy is not None:
+        print(f"  ratio fmpy (prebuilt arrays) through the loader / pythonfmu binary alone: {exchange / plain_fmpy:.2f}")
+    trivial_us = results.get(TRIVIAL_KEY)
+    if trivial_us is not None:
+        print(f"  ratio fmpy (prebuilt arrays) / trivial FMU: {exchange / trivial_us:.2f} (the target 7.5 us at the "
+              f"issue's {TRIVIAL_REFERENCE_US:g} us trivial cycle is a ratio of {TARGET_FMPY_US / TRIVIAL_REFERENCE_US:.2f}; "
+              f"on this run's trivial cycle the fmpy target scales to {TARGET_FMPY_US / TRIVIAL_REFERENCE_US * trivial_us:.2f} us)")
     native = results.get("exchange, native C host through the loader")
     if native is not None:
         before = results.get("exchange, native C host, pythonfmu binary + LD_PRELOAD")
