@@ -240,7 +240,8 @@ def main(argv=None) -> int:
         trivial = trivial_fmu(Path(tmp))
 
         def trivial_prebuilt(n):
-            t_set, t_step, t_get, t_comp = trivial.fmi2SetReal, trivial.fmi2DoStep, trivial.fmi2GetReal, trivial.component
+            t_set, t_step, t_get = trivial.fmi2SetReal, trivial.fmi2DoStep, trivial.fmi2GetReal
+            t_comp = trivial.component
             for i in range(n):
                 val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
                 t_set(t_comp, vr_in, 6, val_in)
@@ -341,12 +342,14 @@ def main(argv=None) -> int:
     print(f"  ratio exchange (prebuilt arrays) / in-process evaluate (8 balls): {exchange / in_process:.1f}")
     plain_fmpy = results.get("exchange, fmpy fmi2* prebuilt, pythonfmu binary alone (no loader)")
     if plain_fmpy is not None:
-        print(f"  ratio fmpy (prebuilt arrays) through the loader / pythonfmu binary alone: {exchange / plain_fmpy:.2f}")
+        print(f"  ratio fmpy (prebuilt arrays) through the loader / pythonfmu binary alone: "
+              f"{exchange / plain_fmpy:.2f}")
     trivial_us = results.get(TRIVIAL_KEY)
     if trivial_us is not None:
+        ratio = TARGET_FMPY_US / TRIVIAL_REFERENCE_US
         print(f"  ratio fmpy (prebuilt arrays) / trivial FMU: {exchange / trivial_us:.2f} (the target 7.5 us at the "
-              f"issue's {TRIVIAL_REFERENCE_US:g} us trivial cycle is a ratio of {TARGET_FMPY_US / TRIVIAL_REFERENCE_US:.2f}; "
-              f"on this run's trivial cycle the fmpy target scales to {TARGET_FMPY_US / TRIVIAL_REFERENCE_US * trivial_us:.2f} us)")
+              f"issue's {TRIVIAL_REFERENCE_US:g} us trivial cycle is a ratio of {ratio:.2f}; on this run's trivial "
+              f"cycle the fmpy target scales to {ratio * trivial_us:.2f} us)")
     native = results.get("exchange, native C host through the loader")
     if native is not None:
         before = results.get("exchange, native C host, pythonfmu binary + LD_PRELOAD")

@@ -42,6 +42,9 @@
  *     dropped with logging off (see pass_message);
  *   - returns fmi2Error, not pythonfmu's fmi2Fatal, from a failed fmi2ExitInitializationMode: our slaves
  *     leave the instance intact there (docs/fmu-interface.md, "Errors");
+ *   - serves fmi2SetReal of inputs, fmi2DoStep and fmi2GetReal of the force outputs with one Python call
+ *     per step when the slave registered a step function (bearingLoaderRegisterStep; "fast path" below),
+ *     with the values and statuses of pythonfmu's path;
  *   - implements fmi2GetDirectionalDerivative from the FMU's tangent outputs when the build gives it a
  *     table (unknown, known) -> output holding d unknown / d known (see fmu_bearing/native/build.py);
  *     pythonfmu 0.7 does not support that call.
@@ -763,9 +766,9 @@ EXPORT void fmi2FreeInstance(fmi2Component c) {
    the order of in_vr; it returns None (step refused: fmi2Discard) or a tuple whose item out_index[k] is
    the value of out_vr[k] after the step. ``queue`` (or NULL) is the list pythonfmu takes the slave's
    log messages from at the end of each call (pythonfmu's Fmi2Slave.log_queue): when it is not empty
-   after a step, the loader has pythonfmu send them, as its fmi2DoStep would. 1: registered; 0: not (no instance is being instantiated on this
-   thread, or the Python library lacks a function the fast path needs): the slave is used through
-   pythonfmu as before. */
+   after a step, the loader has pythonfmu send them, as its fmi2DoStep would. 1: registered; 0: not (no
+   instance is being instantiated on this thread, or the Python library lacks a function the fast path
+   needs): the slave is used through pythonfmu as before. */
 EXPORT int bearingLoaderRegisterStep(void *step, void *queue, const fmi2ValueReference *in_vr, int n_in,
                                      const fmi2ValueReference *out_vr, const int *out_index, int n_out) {
     Instance *inst = registering;

@@ -76,8 +76,9 @@ def register_fast_step(resources, step, log_queue, input_vrs, outputs) -> bool:
     this thread: it then makes fmi2SetReal of the inputs, fmi2DoStep and fmi2GetReal of ``outputs``
     ((value reference, index in what ``step`` returns)) one Python call per step instead of three through
     pythonfmu; after a step that left messages in ``log_queue`` (pythonfmu's) it has pythonfmu send them,
-    as pythonfmu's fmi2DoStep would. The loader holds ``step`` until fmi2FreeInstance or fmi2Reset. False: not registered (no
-    loader, pythonfmu's binary alone, in-process): pythonfmu's path, with the same results."""
+    as pythonfmu's fmi2DoStep would. The loader holds ``step`` until fmi2FreeInstance or fmi2Reset.
+    False: not registered (no loader, pythonfmu's binary alone, in-process): pythonfmu's path, with the
+    same results. (A helper of this module, not of fmu_bearing.slaves, which another change owns.)"""
     if not resources:
         return False
     binaries = os.path.join(os.path.dirname(os.path.abspath(str(resources))), "binaries")
