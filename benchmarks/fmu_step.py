@@ -1,6 +1,7 @@
 """Cost of one co-simulation exchange with the BallBearing FMU against the in-process force law.
 
-    python benchmarks/fmu_step.py [--fmu dist/BallBearing.fmu] [--calls 3000] [--repeat 7] [--no-native]
+    python benchmarks/fmu_step.py [--fmu dist/BallBearing.fmu] [--baseline OLD.fmu] [--calls 3000] [--repeat 7]
+                                  [--no-native]
 
 Targets on the development machine: in-process evaluate <= 10 us for 8 balls, exchange <= 25 us;
 issue 13: native-host cycle <= 10 us, fmpy cycle (prebuilt arrays) <= 7.5 us.
@@ -11,6 +12,14 @@ per call), fmpy's fmi2* wrappers with prebuilt ctypes arrays (what the master do
 ctypes function pointers (no fmpy wrapper). The breakdown times each call alone and the slave's own
 Python code called directly, so the rest is pythonfmu's C++ layer plus ctypes. Every figure is the
 median over ``--repeat`` runs of ``--calls`` calls, in microseconds per call.
+
+For scale (the machine may be busy: compare figures of one run), the same fmpy loops are timed with a
+trivial compiled FMU (``TRIVIAL_FMU`` below, compiled with zig cc: fmi2SetReal copies, fmi2DoStep adds,
+fmi2GetReal copies): what fmpy and ctypes cost a host without any model, and its native-host cycle is the
+floor of the C host's. The ratios printed at the end use those figures.
+
+``--baseline OLD.fmu`` also times an earlier build of the FMU in the same run (fmpy prebuilt arrays and the
+native host, interleaved with the others), for a before/after ratio that the machine's load does not blur.
 
 The native-host cycle is the same exchange from the C host ``fmu_bearing/native/host.c`` (a separate,
 non-Python process, clean environment; timed inside the host), through the FMU's loader; and, for
@@ -37,6 +46,11 @@ from fmu_bearing.parameters import BearingParameters  # noqa: E402
 INPUTS = ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")
 TARGET_IN_PROCESS_US, TARGET_EXCHANGE_US = 10.0, 25.0
 TARGET_NATIVE_US, TARGET_FMPY_US = 10.0, 7.5
+#: the issue's reference: a trivial compiled FMU costs about 2 us per cycle through fmpy (prebuilt arrays)
+TRIVIAL_REFERENCE_US = 2.0
+TRIVIAL_KEY = "exchange, fmpy fmi2* prebuilt, trivial compiled FMU (no model)"
+BASELINE_FMPY_KEY = "exchange, fmpy fmi2* prebuilt, --baseline FMU"
+BASELINE_NATIVE_KEY = "exchange, native C host, --baseline FMU"
 
 
 def states(n=64):
@@ -60,7 +74,7 @@ def medians_us(benchmarks: dict, calls: int, repeat: int) -> dict:
     return {name: statistics.median(times) for name, times in runs.items()}
 
 
-def native_cycles(fmu_path: Path, tmp: Path, calls: int, repeat: int) -> dict:
+def native_cycles(fmu_path: Path, tmp: Path, calls: int, repeat: int, baseline: Path | None = None) -> dict:
     """Median set/step/get cycle [us] in the native C host: through the loader (clean environment), and
     through pythonfmu's binary alone with libpython preloaded (skipped if this Python has no shared one)."""
     import sysconfig
@@ -68,16 +82,19 @@ def native_cycles(fmu_path: Path, tmp: Path, calls: int, repeat: int) -> dict:
 
     from fmu_bearing.native.host import clean_env, compile_host, run_host
     host = compile_host(tmp)
-    loader_dir, plain_dir = tmp / "native_loader", tmp / "native_pythonfmu"
-    for folder in (loader_dir, plain_dir):
-        with zipfile.ZipFile(fmu_path) as z:
-            z.extractall(folder)
+    loader_dir, plain_dir, baseline_dir = tmp / "native_loader", tmp / "native_pythonfmu", tmp / "native_baseline"
+    for folder, path in ((loader_dir, fmu_path), (plain_dir, fmu_path), (baseline_dir, baseline)):
+        if path is not None:
+            with zipfile.ZipFile(path) as z:
+                z.extractall(folder)
     binaries = plain_dir / "binaries" / "linux64"
     plain = list(binaries.glob("*_pythonfmu.so"))
     for original in plain:
         original.replace(binaries / original.name.replace("_pythonfmu", ""))
     libpython = Path(sysconfig.get_config_var("LIBDIR") or "") / (sysconfig.get_config_var("INSTSONAME") or "-")
     cases = {"exchange, native C host through the loader": (loader_dir, clean_env())}
+    if baseline is not None:
+        cases[BASELINE_NATIVE_KEY] = (baseline_dir, clean_env())
     if plain and libpython.is_file():
         cases["exchange, native C host, pythonfmu binary + LD_PRELOAD"] = (plain_dir, clean_env(LD_PRELOAD=str(libpython)))
     runs = {name: [] for name in cases}
@@ -88,6 +105,73 @@ def native_cycles(fmu_path: Path, tmp: Path, calls: int, repeat: int) -> dict:
                 raise RuntimeError(f"{name}: host failed ({run.returncode}): {run.stderr[-2000:]}")
             runs[name].append(run.cycle_us)
     return {name: statistics.median(times) for name, times in runs.items()}
+
+
+#: a trivial FMI 2.0 co-simulation library (the exchange costs of fmpy and ctypes, without any model)
+TRIVIAL_FMU = r"""
+#include <stdlib.h>
+#include <string.h>
+#define EXPORT __attribute__((visibility("default")))
+typedef struct { double x[16]; } M;
+EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
+EXPORT const char *fmi2GetVersion(void) { return "2.0"; }
+EXPORT void *fmi2Instantiate(const char *n, int t, const char *g, const char *r, const void *f, int v, int l) {
+    return calloc(1, sizeof(M));
+}
+EXPORT void fmi2FreeInstance(void *c) { free(c); }
+EXPORT int fmi2SetupExperiment(void *c, int a, double b, double d, int e, double f) { return 0; }
+EXPORT int fmi2EnterInitializationMode(void *c) { return 0; }
+EXPORT int fmi2ExitInitializationMode(void *c) { return 0; }
+EXPORT int fmi2Terminate(void *c) { return 0; }
+EXPORT int fmi2SetReal(void *c, const unsigned *vr, size_t n, const double *v) {
+    for (size_t i = 0; i < n; i++) ((M *)c)->x[vr[i] & 15] = v[i];
+    return 0;
+}
+EXPORT int fmi2GetReal(void *c, const unsigned *vr, size_t n, double *v) {
+    for (size_t i = 0; i < n; i++) v[i] = ((M *)c)->x[vr[i] & 15];
+    return 0;
+}
+/* every other FMI 2.0 function (fmpy resolves them all): a stub that returns fmi2OK */
+#define STUB(name) EXPORT int name(void *c, void *a, void *b, void *d, void *e, void *f) { return 0; }
+STUB(fmi2SetDebugLogging) STUB(fmi2Reset) STUB(fmi2GetInteger) STUB(fmi2GetBoolean) STUB(fmi2GetString)
+STUB(fmi2SetInteger) STUB(fmi2SetBoolean) STUB(fmi2SetString) STUB(fmi2GetFMUstate) STUB(fmi2SetFMUstate)
+STUB(fmi2FreeFMUstate) STUB(fmi2SerializedFMUstateSize) STUB(fmi2SerializeFMUstate) STUB(fmi2DeSerializeFMUstate)
+STUB(fmi2GetDirectionalDerivative) STUB(fmi2SetRealInputDerivatives) STUB(fmi2GetRealOutputDerivatives)
+STUB(fmi2CancelStep) STUB(fmi2GetStatus) STUB(fmi2GetRealStatus) STUB(fmi2GetIntegerStatus)
+STUB(fmi2GetBooleanStatus) STUB(fmi2GetStringStatus)
+EXPORT int fmi2DoStep(void *c, double t, double h, int s) {
+    M *m = (M *)c;
+    m->x[6] = m->x[0] + m->x[1];
+    m->x[7] = m->x[2] + m->x[3] + m->x[4] + m->x[5];
+    return 0;
+}
+"""
+
+
+def trivial_fmu(tmp: Path):
+    """An fmpy FMU2Slave of the trivial library (compiled here), or None without zig."""
+    import subprocess
+
+    from fmpy.fmi2 import FMU2Slave
+
+    from fmu_bearing.native.build import LoaderBuildError, zig_cc
+    folder = tmp / "trivial"
+    binaries = folder / "binaries" / "linux64"
+    binaries.mkdir(parents=True)
+    (tmp / "trivial.c").write_text(TRIVIAL_FMU, encoding="utf-8")
+    try:
+        proc = subprocess.run([*zig_cc(), "-shared", "-fPIC", "-O2", "-o", str(binaries / "Trivial.so"),
+                               str(tmp / "trivial.c")], capture_output=True, text=True)
+    except LoaderBuildError:
+        return None
+    if proc.returncode != 0:
+        return None
+    fmu = FMU2Slave(guid="trivial", unzipDirectory=str(folder), modelIdentifier="Trivial", instanceName="trivial")
+    fmu.instantiate(loggingOn=False)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    return fmu
 
 
 def find_fmu(path: str | None, tmp: Path) -> Path:
@@ -101,6 +185,7 @@ def find_fmu(path: str | None, tmp: Path) -> Path:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--fmu", help="FMU to measure (default: a fresh build of the current sources)")
+    parser.add_argument("--baseline", help="an earlier build of the FMU to time in the same run (before/after)")
     parser.add_argument("--calls", type=int, default=3000)
     parser.add_argument("--repeat", type=int, default=7)
     parser.add_argument("--no-native", action="store_true", help="skip the native-host cycle (needs ziglang)")
@@ -152,6 +237,28 @@ def main(argv=None) -> int:
             plain_fmu.enterInitializationMode()
             plain_fmu.exitInitializationMode()
 
+        # An earlier build (--baseline), through its own binary, in the same process.
+        base_fmu = None
+        if args.baseline:
+            base_md = read_model_description(args.baseline)
+            base_dir = extract(args.baseline, unzipdir=str(Path(tmp) / "x_baseline"))
+            base_fmu = FMU2Slave(guid=base_md.guid, unzipDirectory=base_dir,
+                                 modelIdentifier=base_md.coSimulation.modelIdentifier, instanceName="bench_baseline")
+            base_fmu.instantiate(loggingOn=False)
+            base_fmu.setupExperiment(startTime=0.0)
+            base_fmu.enterInitializationMode()
+            base_fmu.exitInitializationMode()
+
+        def fmpy_prebuilt_baseline(n):
+            b_set, b_step, b_get, b_comp = (base_fmu.fmi2SetReal, base_fmu.fmi2DoStep, base_fmu.fmi2GetReal,
+                                            base_fmu.component)
+            for i in range(n):
+                val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
+                b_set(b_comp, vr_in, 6, val_in)
+                b_step(b_comp, i * h, h, 1)
+                b_get(b_comp, vr_out, 2, val_out)
+                val_out[0], val_out[1]
+
         def fmpy_prebuilt_plain(n):
             p_set, p_step, p_get, p_comp = (plain_fmu.fmi2SetReal, plain_fmu.fmi2DoStep, plain_fmu.fmi2GetReal,
                                             plain_fmu.component)
@@ -160,6 +267,18 @@ def main(argv=None) -> int:
                 p_set(p_comp, vr_in, 6, val_in)
                 p_step(p_comp, i * h, h, 1)
                 p_get(p_comp, vr_out, 2, val_out)
+                val_out[0], val_out[1]
+
+        trivial = trivial_fmu(Path(tmp))
+
+        def trivial_prebuilt(n):
+            t_set, t_step, t_get = trivial.fmi2SetReal, trivial.fmi2DoStep, trivial.fmi2GetReal
+            t_comp = trivial.component
+            for i in range(n):
+                val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
+                t_set(t_comp, vr_in, 6, val_in)
+                t_step(t_comp, i * h, h, 1)
+                t_get(t_comp, vr_out, 2, val_out)
                 val_out[0], val_out[1]
 
         def fmpy_convenience(n):
@@ -221,9 +340,13 @@ def main(argv=None) -> int:
         c, r = args.calls, args.repeat
         plain = {"exchange, fmpy fmi2* prebuilt, pythonfmu binary alone (no loader)": fmpy_prebuilt_plain} \
             if plain_fmu is not None else {}
+        trivial_case = {TRIVIAL_KEY: trivial_prebuilt} if trivial is not None else {}
+        baseline_case = {BASELINE_FMPY_KEY: fmpy_prebuilt_baseline} if base_fmu is not None else {}
         results = medians_us({
             "exchange, fmpy setReal/doStep/getReal": fmpy_convenience,
+            **trivial_case,
             "exchange, fmpy fmi2* with prebuilt ctypes arrays": fmpy_prebuilt,
+            **baseline_case,
             **plain,
             "exchange, raw ctypes function pointers": raw_ctypes,
             "  of which fmi2SetReal (6 values)": only_set,
@@ -235,11 +358,15 @@ def main(argv=None) -> int:
         }, c, r)
         fmu.terminate()
         fmu.freeInstance()
+        for other in (trivial, base_fmu):
+            if other is not None:
+                other.terminate()
+                other.freeInstance()
         if plain_fmu is not None:
             plain_fmu.terminate()
             plain_fmu.freeInstance()
         if not args.no_native:
-            results.update(native_cycles(fmu_path, Path(tmp), c, r))
+            results.update(native_cycles(fmu_path, Path(tmp), c, r, Path(args.baseline) if args.baseline else None))
 
     width = max(map(len, results))
     print(f"BallBearing FMU exchange vs in-process force law ({fmu_path.name}; median of {r} x {c} calls)")
@@ -248,6 +375,21 @@ def main(argv=None) -> int:
     exchange = results["exchange, fmpy fmi2* with prebuilt ctypes arrays"]
     in_process = results["in-process evaluate, 8 balls"]
     print(f"  ratio exchange (prebuilt arrays) / in-process evaluate (8 balls): {exchange / in_process:.1f}")
+    plain_fmpy = results.get("exchange, fmpy fmi2* prebuilt, pythonfmu binary alone (no loader)")
+    if plain_fmpy is not None:
+        print(f"  ratio fmpy (prebuilt arrays) through the loader / pythonfmu binary alone: "
+              f"{exchange / plain_fmpy:.2f}")
+    trivial_us = results.get(TRIVIAL_KEY)
+    if trivial_us is not None:
+        ratio = TARGET_FMPY_US / TRIVIAL_REFERENCE_US
+        print(f"  ratio fmpy (prebuilt arrays) / trivial FMU: {exchange / trivial_us:.2f} (the target 7.5 us at the "
+              f"issue's {TRIVIAL_REFERENCE_US:g} us trivial cycle is a ratio of {ratio:.2f}; on this run's trivial "
+              f"cycle the fmpy target scales to {ratio * trivial_us:.2f} us)")
+    base_fmpy, base_native = results.get(BASELINE_FMPY_KEY), results.get(BASELINE_NATIVE_KEY)
+    if base_fmpy is not None:
+        print(f"  ratio this FMU / --baseline FMU: fmpy (prebuilt arrays) {exchange / base_fmpy:.2f}"
+              + (f", native host {results['exchange, native C host through the loader'] / base_native:.2f}"
+                 if base_native is not None else ""))
     native = results.get("exchange, native C host through the loader")
     if native is not None:
         before = results.get("exchange, native C host, pythonfmu binary + LD_PRELOAD")

@@ -29,6 +29,11 @@ OIL_FILM_PI = math.pi
 FILM_SPEED_EXPONENT, FILM_LOAD_EXPONENT, FILM_COEFFICIENT = 0.744, 0.078, 1.15
 
 
+_cos, _sin, _sqrt = math.cos, math.sin, math.sqrt
+#: BearingForce(*values) without the Python-level __new__ of a NamedTuple: the same object, faster
+_new_tuple = tuple.__new__
+
+
 class BearingInputError(ValueError):
     """Inputs the force law cannot accept (NaN/inf, or an eccentricity beyond the divergence limit)."""
 
@@ -102,6 +107,7 @@ class BallBearing:
         # Pure-rolling entrainment speed u = |omega_i - omega_o| d_i d_o / (2 (d_i + d_o)), same at both contacts.
         self._entrainment = d_i * d_o / (2.0 * (d_i + d_o))
         self._oil = self._oil_film_constants(p) if self.damping_model == DAMPING_OIL_FILM else None
+        self._unused_loads = [0.0] * self.n_balls   # evaluate() writes here when it is given no ``loads``
 
     # --- kinematics -----------------------------------------------------------------------------
     def cage_velocity(self, omega_inner: float, omega_outer: float) -> float:
@@ -131,39 +137,39 @@ class BallBearing:
         u_r = (cos phi_r, sin phi_r). ``loads``, if given, receives the N_b ball loads [N].
         The ring speeds matter only for the oil-film damping (entrainment speed).
         """
-        c, s = math.cos(cage_angle), math.sin(cage_angle)
+        # (speed: called once per co-simulation step; every expression keeps its order of operations, so
+        # the results are the same doubles as the plain form: 1.5 * K * root is (1.5 * K) * root)
+        c, s = _cos(cage_angle), _sin(cage_angle)
         # e and v in the cage frame, where ball r sits at the fixed angle 2 pi r / N_b.
         ex, ey = c * e_x + s * e_y, c * e_y - s * e_x
         vx, vy = c * v_x + s * v_y, c * v_y - s * v_x
         K, half = self.stiffness, self.half_clearance
-        model, C = self.damping_model, self.damping_coefficient
-        if model != DAMPING_CONSTANT:
-            C = 0.0
+        K15 = 1.5 * K
+        C = self.damping_coefficient if self.damping_model == DAMPING_CONSTANT else 0.0
         oil = self._oil
         speed = (self._entrainment * abs(omega_inner - omega_outer)) ** FILM_SPEED_EXPONENT if oil else 0.0
+        if loads is None:
+            loads = self._unused_loads
         fx = fy = kxx = kxy = kyy = cc = cs_ = ss = 0.0
         n_loaded, f_max = 0, 0.0
         for r, cr, sr, crr, crs, srr in self._balls:
             delta = ex * cr + ey * sr - half
             if delta <= 0.0:                       # outside the load zone: no force, damping included
-                if loads is not None:
-                    loads[r] = 0.0
+                loads[r] = 0.0
                 continue
-            root = math.sqrt(delta)
+            root = _sqrt(delta)
             w = K * delta * root                   # Hertz, eq. (18)
             vr = vx * cr + vy * sr
             if oil is not None:                    # eq. (29)-(32)
                 C, dC_dW = self._oil_film_damping(w, speed)
-                kt = 1.5 * K * root * (1.0 + dC_dW * vr)
+                kt = K15 * root * (1.0 + dC_dW * vr)
             else:
-                kt = 1.5 * K * root
+                kt = K15 * root
             f = w + C * vr
             if f <= 0.0:                           # a contact cannot pull: clamp at zero
-                if loads is not None:
-                    loads[r] = 0.0
+                loads[r] = 0.0
                 continue
-            if loads is not None:
-                loads[r] = f
+            loads[r] = f
             fx += f * cr
             fy += f * sr
             kxx += kt * crr
@@ -177,13 +183,13 @@ class BallBearing:
                 f_max = f
         # Back to the global frame: F = R f, K = R k R^T (eq. 19).
         c2, s2, cs2 = c * c, s * s, c * s
-        return BearingForce(
+        return _new_tuple(BearingForce, (
             c * fx - s * fy, s * fx + c * fy,
             c2 * kxx - 2.0 * cs2 * kxy + s2 * kyy, cs2 * (kxx - kyy) + (c2 - s2) * kxy,
             s2 * kxx + 2.0 * cs2 * kxy + c2 * kyy,
             c2 * cc - 2.0 * cs2 * cs_ + s2 * ss, cs2 * (cc - ss) + (c2 - s2) * cs_,
             s2 * cc + 2.0 * cs2 * cs_ + c2 * ss,
-            n_loaded, f_max)
+            n_loaded, f_max))
 
     def elastic_energy(self, e_x: float, e_y: float, cage_angle: float) -> float:
         """Strain energy stored in the loaded contacts, sum of (2/5) K delta_r^2.5 [J] (tests, energy balance)."""

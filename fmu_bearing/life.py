@@ -35,6 +35,9 @@ P_BALL = 3.0
 P_STATIONARY = 10.0 / 3.0
 #: seconds per hour
 HOUR = 3600.0
+#: 2 pi and p / p e, computed once (the same doubles as written out in LifeAccumulator.add)
+_TWO_PI = 2.0 * math.pi
+_CUBE_OF_STATIONARY = P_BALL / P_STATIONARY
 
 
 #: outputs of the BallBearing FMU (and of the in-process endpoint) from the ratings, computed from the
@@ -203,15 +206,18 @@ class LifeAccumulator:
             raise LifeInputError(f"time step dt = {dt!r} must be >= 0")
         z = self.n_balls
         s3 = s103 = 0.0
-        for k in range(z):
-            q = loads[k]
+        p_e = P_STATIONARY
+        used = loads[:z]
+        if len(used) < z:
+            loads[z - 1]   # IndexError, as indexing each of the first n_balls would raise
+        for q in used:
             if q > 0.0:
                 s3 += q * q * q
-                s103 += q ** P_STATIONARY
-        dn = abs(omega_inner - omega_outer) * dt / (2.0 * math.pi)   # revolutions of one ring relative to the other
+                s103 += q ** p_e
+        dn = abs(omega_inner - omega_outer) * dt / _TWO_PI   # revolutions of one ring relative to the other
         if s3 > 0.0:
             q_rot3 = s3 / z                                   # (cubic mean)^3
-            q_stat3 = (s103 / z) ** (P_BALL / P_STATIONARY)   # ((10/3)-power mean)^3
+            q_stat3 = (s103 / z) ** _CUBE_OF_STATIONARY       # ((10/3)-power mean)^3
             if abs(omega_inner - load_angular_velocity) >= abs(omega_outer - load_angular_velocity):
                 self.sum_cubed_inner += q_rot3 * dn
                 self.sum_cubed_outer += q_stat3 * dn

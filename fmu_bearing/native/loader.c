@@ -42,6 +42,9 @@
  *     dropped with logging off (see pass_message);
  *   - returns fmi2Error, not pythonfmu's fmi2Fatal, from a failed fmi2ExitInitializationMode: our slaves
  *     leave the instance intact there (docs/fmu-interface.md, "Errors");
+ *   - serves fmi2SetReal of inputs, fmi2DoStep and fmi2GetReal of the force outputs with one Python call
+ *     per step when the slave registered a step function (bearingLoaderRegisterStep; "fast path" below),
+ *     with the values and statuses of pythonfmu's path;
  *   - implements fmi2GetDirectionalDerivative from the FMU's tangent outputs when the build gives it a
  *     table (unknown, known) -> output holding d unknown / d known (see fmu_bearing/native/build.py);
  *     pythonfmu 0.7 does not support that call.
@@ -52,6 +55,7 @@
 #define _GNU_SOURCE
 #endif
 #include <stdarg.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -118,17 +122,11 @@ typedef struct {
       (fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real t0, fmi2Boolean stopDef, fmi2Real t1),   \
       (c, tolDef, tol, t0, stopDef, t1))                                                                    \
     X(fmi2Status, EnterInitializationMode, (fmi2Component c), (c))                                          \
-    X(fmi2Status, Terminate, (fmi2Component c), (c))                                                        \
-    X(fmi2Status, Reset, (fmi2Component c), (c))                                                            \
-    X(fmi2Status, GetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]),        \
-      (c, vr, n, v))                                                                                        \
     X(fmi2Status, GetInteger, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]),  \
       (c, vr, n, v))                                                                                        \
     X(fmi2Status, GetBoolean, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]),  \
       (c, vr, n, v))                                                                                        \
     X(fmi2Status, GetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]),    \
-      (c, vr, n, v))                                                                                        \
-    X(fmi2Status, SetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]),  \
       (c, vr, n, v))                                                                                        \
     X(fmi2Status, SetInteger,                                                                               \
       (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer v[]), (c, vr, n, v))     \
@@ -150,13 +148,22 @@ typedef struct {
     X(fmi2Status, GetRealOutputDerivatives,                                                                 \
       (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer o[], fmi2Real v[]),      \
       (c, vr, n, o, v))                                                                                     \
-    X(fmi2Status, DoStep, (fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior), (c, t, h, noSetPrior)) \
     X(fmi2Status, CancelStep, (fmi2Component c), (c))                                                       \
     X(fmi2Status, GetStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Status * v), (c, k, v))          \
     X(fmi2Status, GetRealStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Real * v), (c, k, v))        \
     X(fmi2Status, GetIntegerStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Integer * v), (c, k, v))  \
     X(fmi2Status, GetBooleanStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Boolean * v), (c, k, v))  \
     X(fmi2Status, GetStringStatus, (fmi2Component c, const fmi2StatusKind k, fmi2String * v), (c, k, v))
+
+/* the functions of the fast path (see "fast path" below): defined one by one, not by FORWARD */
+#define FMI2_FAST_FUNCTIONS(X)                                                                              \
+    X(fmi2Status, Terminate, (fmi2Component c), (c))                                                        \
+    X(fmi2Status, Reset, (fmi2Component c), (c))                                                            \
+    X(fmi2Status, GetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]),        \
+      (c, vr, n, v))                                                                                        \
+    X(fmi2Status, SetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]),  \
+      (c, vr, n, v))                                                                                        \
+    X(fmi2Status, DoStep, (fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior), (c, t, h, noSetPrior))
 
 typedef fmi2Component (*InstantiateFn)(fmi2String, fmi2Type, fmi2String, fmi2String,
                                        const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
@@ -175,6 +182,7 @@ static struct {
     GetDirectionalDerivativeFn GetDirectionalDerivative;
     void (*finalize)(void);
     FMI2_FUNCTIONS(DECLARE_POINTER)
+    FMI2_FAST_FUNCTIONS(DECLARE_POINTER)
 } fmi;
 
 /* ---- the few Python C API functions the loader itself calls (stable ABI, 3.9+) -------------------- */
@@ -187,9 +195,28 @@ static struct {
     void *(*Eval_SaveThread)(void);
     void (*SetPythonHome)(const wchar_t *);
     wchar_t *(*DecodeLocale)(const char *, size_t *);
+    /* the fast path (optional: without any of them every call is forwarded) */
+    void (*GILState_Release)(PyGILState_STATE);
+    void (*IncRef)(void *);
+    void (*DecRef)(void *);
+    void *(*Float_FromDouble)(double);
+    double (*Float_AsDouble)(void *);
+    void *(*Tuple_New)(ptrdiff_t);
+    int (*Tuple_SetItem)(void *, ptrdiff_t, void *);
+    void *(*Tuple_GetItem)(void *, ptrdiff_t);
+    ptrdiff_t (*Tuple_Size)(void *);
+    void *(*Object_Call)(void *, void *, void *);
+    void *(*Object_Vectorcall)(void *, void *const *, size_t, void *);   /* 3.12+ stable ABI; else NULL */
+    void *(*Err_Occurred)(void);
+    void (*Err_Clear)(void);
+    ptrdiff_t (*List_Size)(void *);
+    void *None;                                     /* _Py_NoneStruct */
 } py;
+static int fast_api;  /* 1: every function the fast path needs (but Object_Vectorcall) was found */
 
 #define MAX_CATEGORIES 16
+#define FAST_MAX_IN 16
+#define FAST_MAX_OUT 32
 
 /* ---- one instance: pythonfmu's component and the host's callbacks --------------------------------- */
 typedef struct {
@@ -205,7 +232,20 @@ typedef struct {
     char categories[MAX_CATEGORIES][64];
     volatile int direct_error;          /* the slave sent an error to the host directly during this call */
     int in_exit_initialization;         /* inside fmi2ExitInitializationMode: Fatal is reported as Error */
+    /* the fast path (see "fast path" below) */
+    void *step;                         /* PyObject*: the slave's step(t, h, *inputs), a strong reference */
+    void *queue;                        /* PyObject*: the slave's log queue (a list pythonfmu empties), or NULL */
+    int n_in, n_out;
+    fmi2ValueReference in_vr[FAST_MAX_IN], out_vr[FAST_MAX_OUT];
+    int out_index[FAST_MAX_OUT];        /* out_vr[k] is item out_index[k] of what step returns */
+    int fast_on;                        /* step registered, initialised, not terminated */
+    int in_valid;                       /* in_val mirrors the slave's inputs */
+    unsigned in_dirty;                  /* bit i: in_val[i] was set here and not yet passed to the slave */
+    int out_valid;                      /* out_val mirrors the slave's outputs out_vr */
+    fmi2Real in_val[FAST_MAX_IN], out_val[FAST_MAX_OUT];
 } Instance;
+
+static void drop_step(Instance *inst);
 
 /* The live instances, so bearingLoaderHostCallbacks can tell one of ours from any other pointer without
    dereferencing it. */
@@ -218,6 +258,10 @@ static char load_error[4096];    /* why loading failed (reported by every fmi2In
 __attribute__((tls_model("initial-exec")))  /* no __tls_get_addr call on every FMI call */
 #endif
 static THREAD_LOCAL int thread_attached;  /* 1: this thread has its persistent Python thread state */
+#if defined(__linux__)
+__attribute__((tls_model("initial-exec")))
+#endif
+static THREAD_LOCAL Instance *registering;  /* inside this thread's fmi2Instantiate / fmi2Reset of it */
 
 #ifndef _WIN32
 static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -423,7 +467,25 @@ static int resolve_python(Library lib) {
     RESOLVE(Eval_SaveThread, "PyEval_SaveThread")
     RESOLVE(SetPythonHome, "Py_SetPythonHome")
     RESOLVE(DecodeLocale, "Py_DecodeLocale")
+    RESOLVE(GILState_Release, "PyGILState_Release")
+    RESOLVE(IncRef, "Py_IncRef")
+    RESOLVE(DecRef, "Py_DecRef")
+    RESOLVE(Float_FromDouble, "PyFloat_FromDouble")
+    RESOLVE(Float_AsDouble, "PyFloat_AsDouble")
+    RESOLVE(Tuple_New, "PyTuple_New")
+    RESOLVE(Tuple_SetItem, "PyTuple_SetItem")
+    RESOLVE(Tuple_GetItem, "PyTuple_GetItem")
+    RESOLVE(Tuple_Size, "PyTuple_Size")
+    RESOLVE(Object_Call, "PyObject_Call")
+    RESOLVE(Object_Vectorcall, "PyObject_Vectorcall")
+    RESOLVE(Err_Occurred, "PyErr_Occurred")
+    RESOLVE(Err_Clear, "PyErr_Clear")
+    RESOLVE(List_Size, "PyList_Size")
+    RESOLVE(None, "_Py_NoneStruct")
 #undef RESOLVE
+    fast_api = py.GILState_Release && py.IncRef && py.DecRef && py.Float_FromDouble && py.Float_AsDouble &&
+               py.Tuple_New && py.Tuple_SetItem && py.Tuple_GetItem && py.Tuple_Size && py.Object_Call &&
+               py.Err_Occurred && py.Err_Clear && py.List_Size && py.None;
     return py.IsInitialized && py.InitializeEx && py.GILState_GetThisThreadState && py.GILState_Ensure &&
            py.Eval_SaveThread;
 }
@@ -574,6 +636,7 @@ static int ensure_loaded(void) {
     fmi.GetDirectionalDerivative = (GetDirectionalDerivativeFn)lib_sym(lib, "fmi2GetDirectionalDerivative");
 #define RESOLVE_FMI(ret, name, params, args) fmi.name = (ret(*) params)lib_sym(lib, "fmi2" #name);
     FMI2_FUNCTIONS(RESOLVE_FMI)
+    FMI2_FAST_FUNCTIONS(RESOLVE_FMI)
 #undef RESOLVE_FMI
     if (fmi.Instantiate == NULL || fmi.FreeInstance == NULL || fmi.DoStep == NULL || fmi.SetDebugLogging == NULL ||
         fmi.ExitInitializationMode == NULL) {
@@ -660,8 +723,11 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type type, fmi
     attach_thread();
     remember(inst, 1);
     /* pythonfmu's logging always on: the loader filters (pass_message) */
+    registering = inst;         /* the slave's __init__ may register its step (bearingLoaderRegisterStep) */
     inst->inner = fmi.Instantiate(instanceName, type, guid, resourceLocation, &inst->callbacks, visible, 1);
+    registering = NULL;
     if (inst->inner == NULL) {
+        drop_step(inst);
         remember(inst, 0);
         free(inst);
         return NULL;
@@ -673,22 +739,297 @@ EXPORT void fmi2FreeInstance(fmi2Component c) {
     Instance *inst = (Instance *)c;
     if (inst == NULL) return;
     attach_thread();
+    drop_step(inst);            /* before pythonfmu releases the slave: the callable holds it */
     fmi.FreeInstance(inst->inner);
     remember(inst, 0);
     free(inst);
+}
+
+/* ---- fast path ------------------------------------------------------------------------------------
+ * pythonfmu 0.7 costs several microseconds per call (a Python list per call, PyObject_CallMethod with a
+ * format string, four Py_BuildValue per call to empty its log queue, a Python frame per get/set). A slave
+ * can hand the loader one Python callable at instantiation (bearingLoaderRegisterStep, from its __init__):
+ * step(t, h, *inputs) sets the inputs, does the step and returns a tuple that holds the outputs (None when
+ * the step is refused). Once the instance is initialised (a successful fmi2ExitInitializationMode):
+ *   - fmi2SetReal of inputs only stores the values here (in_val, marked dirty);
+ *   - fmi2DoStep makes one call of step with the current inputs and keeps the outputs it returns;
+ *   - fmi2GetReal of inputs and of those outputs is answered from here.
+ * Everything else is forwarded to pythonfmu as before, after the stored inputs were passed on to the slave
+ * (one fmi2SetReal of the dirty ones): so every call sees the same slave as without the fast path. Calls
+ * that may change inputs or outputs (any set, set state, setup, terminate, reset ...) also drop the copies;
+ * reads (get, get/serialize state) keep them. fmi2Terminate, fmi2Reset and fmi2FreeInstance switch the
+ * fast path off (and drop the callable: fmi2Reset's new slave registers again). Hosts that load
+ * pythonfmu's binary without this loader, and slaves that do not register, use pythonfmu's path. */
+
+/* For the FMU's Python side (called with the GIL held, ctypes.PyDLL): register the slave being
+   instantiated on this thread. ``step`` is called as step(t, h, in_1 ... in_n) with n = n_in floats in
+   the order of in_vr; it returns None (step refused: fmi2Discard) or a tuple whose item out_index[k] is
+   the value of out_vr[k] after the step. ``queue`` (or NULL) is the list pythonfmu takes the slave's
+   log messages from at the end of each call (pythonfmu's Fmi2Slave.log_queue): when it is not empty
+   after a step, the loader has pythonfmu send them, as its fmi2DoStep would. 1: registered; 0: not (no
+   instance is being instantiated on this thread, or the Python library lacks a function the fast path
+   needs): the slave is used through pythonfmu as before. */
+EXPORT int bearingLoaderRegisterStep(void *step, void *queue, const fmi2ValueReference *in_vr, int n_in,
+                                     const fmi2ValueReference *out_vr, const int *out_index, int n_out) {
+    Instance *inst = registering;
+    if (inst == NULL || step == NULL || !fast_api || in_vr == NULL || n_in < 1 || n_in > FAST_MAX_IN ||
+        n_out < 0 || n_out > FAST_MAX_OUT || (n_out > 0 && (out_vr == NULL || out_index == NULL)))
+        return 0;
+    for (int k = 0; k < n_out; k++)
+        if (out_index[k] < 0) return 0;
+    if (queue == py.None) queue = NULL;
+    py.IncRef(step);
+    if (queue != NULL) py.IncRef(queue);
+    if (inst->step != NULL) py.DecRef(inst->step);
+    if (inst->queue != NULL) py.DecRef(inst->queue);
+    inst->step = step;
+    inst->queue = queue;
+    inst->n_in = n_in;
+    inst->n_out = n_out;
+    memcpy(inst->in_vr, in_vr, (size_t)n_in * sizeof in_vr[0]);
+    if (n_out > 0) {
+        memcpy(inst->out_vr, out_vr, (size_t)n_out * sizeof out_vr[0]);
+        memcpy(inst->out_index, out_index, (size_t)n_out * sizeof out_index[0]);
+    }
+    inst->fast_on = inst->in_valid = inst->out_valid = 0;
+    inst->in_dirty = 0;
+    return 1;
+}
+
+/* For tests: 1 if the fast path serves ``c`` (one of this loader's live instances) now, else 0. */
+EXPORT int bearingLoaderFastPathOn(const void *c) {
+    int on = 0;
+    LOCK();
+    for (int i = 0; i < MAX_LIVE; i++)
+        if (c != NULL && live[i] == (const Instance *)c) {
+            on = live[i]->fast_on;
+            break;
+        }
+    UNLOCK();
+    return on;
+}
+
+/* Switch the fast path off and release the callable (takes the GIL). */
+static void drop_step(Instance *inst) {
+    inst->fast_on = inst->in_valid = inst->out_valid = 0;
+    inst->in_dirty = 0;
+    if (inst->step != NULL) {
+        PyGILState_STATE g = py.GILState_Ensure();
+        py.DecRef(inst->step);
+        if (inst->queue != NULL) py.DecRef(inst->queue);
+        py.GILState_Release(g);
+        inst->step = inst->queue = NULL;
+    }
+}
+
+/* Pass the inputs set here and not yet to the slave on to it, in one fmi2SetReal. */
+static fmi2Status flush_inputs(Instance *inst) {
+    fmi2ValueReference vr[FAST_MAX_IN];
+    fmi2Real v[FAST_MAX_IN];
+    size_t n = 0;
+    if (inst->in_dirty == 0) return fmi2OK;
+    for (int i = 0; i < inst->n_in; i++)
+        if (inst->in_dirty & (1u << i)) {
+            vr[n] = inst->in_vr[i];
+            v[n++] = inst->in_val[i];
+        }
+    inst->in_dirty = 0;
+    return fmi.SetReal(inst->inner, vr, n, v);
+}
+
+/* Before a call is forwarded to pythonfmu: the slave gets the stored inputs; a call that may change
+   inputs or outputs (``mutates``) drops the copies. */
+static fmi2Status before_forward(Instance *inst, int mutates) {
+    fmi2Status status = flush_inputs(inst);
+    if (mutates) inst->in_valid = inst->out_valid = 0;
+    return status;
+}
+
+/* Whether a forwarded fmi2<name> may change the slave's inputs or outputs (reads do not). */
+static int mutating_call(const char *name) {
+    return !(strncmp(name, "Get", 3) == 0 || strncmp(name, "Serialize", 9) == 0 ||
+             strcmp(name, "FreeFMUstate") == 0 || strcmp(name, "DeSerializeFMUstate") == 0);
+}
+
+static int input_index(const Instance *inst, fmi2ValueReference vr) {
+    for (int i = 0; i < inst->n_in; i++)
+        if (inst->in_vr[i] == vr) return i;
+    return -1;
 }
 
 #define FORWARD(ret, name, params, args)                                                          \
     EXPORT ret fmi2##name params {                                                                \
         if (c == NULL) return fmi2Error;                                                          \
         attach_thread();                                                                          \
-        fmi2Component outer = c;                                                                  \
-        ((Instance *)outer)->direct_error = 0;                                                    \
-        c = ((Instance *)outer)->inner;                                                           \
+        Instance *inst_ = (Instance *)c;                                                          \
+        inst_->direct_error = 0;                                                                  \
+        if (inst_->in_dirty || inst_->in_valid || inst_->out_valid) {                             \
+            fmi2Status flushed_ = before_forward(inst_, mutating_call(#name));                    \
+            if (flushed_ > fmi2Warning) return flushed_;                                          \
+        }                                                                                         \
+        c = inst_->inner;                                                                         \
         return fmi.name args;                                                                     \
     }
 FMI2_FUNCTIONS(FORWARD)
 #undef FORWARD
+
+EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    if (inst->fast_on && (n == 0 || (vr != NULL && v != NULL))) {
+        size_t i;
+        for (i = 0; i < n && input_index(inst, vr[i]) >= 0; i++) {}
+        if (i == n) {   /* inputs only: kept here until the next doStep (or any forwarded call) */
+            for (i = 0; i < n; i++) {
+                int k = input_index(inst, vr[i]);
+                inst->in_val[k] = v[i];
+                inst->in_dirty |= 1u << k;
+            }
+            return fmi2OK;
+        }
+    }
+    if (inst->in_dirty || inst->in_valid || inst->out_valid) {
+        fmi2Status flushed = before_forward(inst, 1);
+        if (flushed > fmi2Warning) return flushed;
+    }
+    return fmi.SetReal(inst->inner, vr, n, v);
+}
+
+EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    if (inst->fast_on && (n == 0 || (vr != NULL && v != NULL))) {
+        size_t i;
+        for (i = 0; i < n; i++) {
+            int k = input_index(inst, vr[i]);
+            if (k >= 0 && (inst->in_valid || (inst->in_dirty & (1u << k)))) {
+                v[i] = inst->in_val[k];
+                continue;
+            }
+            if (k >= 0 || !inst->out_valid) break;
+            for (k = 0; k < inst->n_out && inst->out_vr[k] != vr[i]; k++) {}
+            if (k == inst->n_out) break;
+            v[i] = inst->out_val[k];
+        }
+        if (i == n) return fmi2OK;
+    }
+    if (inst->in_dirty) {
+        fmi2Status flushed = flush_inputs(inst);
+        if (flushed > fmi2Warning) return flushed;
+    }
+    return fmi.GetReal(inst->inner, vr, n, v);
+}
+
+/* One call of the slave's step with the current inputs (in_val complete: in_valid). */
+static fmi2Status fast_step(Instance *inst, fmi2Real t, fmi2Real h) {
+    void *args[2 + FAST_MAX_IN], *result = NULL, *tuple = NULL;
+    int n = 2 + inst->n_in, i, made = 0;
+    fmi2Status status;
+    PyGILState_STATE g = py.GILState_Ensure();
+    args[0] = py.Float_FromDouble(t);
+    args[1] = py.Float_FromDouble(h);
+    for (i = 0; i < inst->n_in; i++) args[2 + i] = py.Float_FromDouble(inst->in_val[i]);
+    for (i = 0; i < n; i++) made += args[i] != NULL;
+    if (made == n) {
+        if (py.Object_Vectorcall != NULL) {
+            result = py.Object_Vectorcall(inst->step, args, (size_t)n, NULL);
+        } else if ((tuple = py.Tuple_New(n)) != NULL) {
+            for (i = 0; i < n; i++) {
+                py.IncRef(args[i]);   /* PyTuple_SetItem steals one reference */
+                py.Tuple_SetItem(tuple, i, args[i]);
+            }
+            result = py.Object_Call(inst->step, tuple, NULL);
+            py.DecRef(tuple);
+        }
+    }
+    for (i = 0; i < n; i++)
+        if (args[i] != NULL) py.DecRef(args[i]);
+    if (result == NULL) {
+        /* only a failure of the Python machinery itself (the slave's step catches everything) */
+        py.Err_Clear();
+        status = fmi2Error;
+    } else if (result == py.None) {
+        inst->in_dirty = 0;          /* the slave holds the inputs */
+        inst->out_valid = 0;         /* refused: outputs unchanged, but keep no copy that could be wrong */
+        status = fmi2Discard;
+    } else {
+        inst->in_dirty = 0;
+        status = fmi2OK;
+        inst->out_valid = 1;
+        ptrdiff_t size = py.Tuple_Size(result);
+        for (i = 0; i < inst->n_out; i++) {
+            if (inst->out_index[i] >= size) {
+                inst->out_valid = 0;
+                break;
+            }
+            inst->out_val[i] = py.Float_AsDouble(py.Tuple_GetItem(result, inst->out_index[i]));
+        }
+        if (py.Err_Occurred() != NULL) {
+            py.Err_Clear();
+            inst->out_valid = 0;     /* not a tuple of floats: outputs are read through pythonfmu */
+        }
+        py.DecRef(result);
+    }
+    int queued = inst->queue == NULL ? status == fmi2Discard : py.List_Size(inst->queue) != 0;
+    py.GILState_Release(g);
+    if (result == NULL) {
+        inst->fast_on = inst->in_valid = inst->out_valid = 0;
+        host_log(inst->host_functions, inst->host_env, inst->name, fmi2Error, "logStatusError",
+                 "fmi2DoStep: the slave's step could not be called (Python error); the loader's fast path is "
+                 "off for this instance");
+    } else if (queued) {
+        /* pythonfmu sends the messages the slave queued during a call at its end: an empty fmi2GetReal
+           empties the queue exactly as pythonfmu's fmi2DoStep would have */
+        fmi2Real none[1];
+        fmi.GetReal(inst->inner, inst->in_vr, 0, none);
+    }
+    return status;
+}
+
+EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    if (inst->fast_on && !inst->in_valid) {   /* the slave's current inputs, once */
+        fmi2Status status = flush_inputs(inst);
+        if (status <= fmi2Warning) status = fmi.GetReal(inst->inner, inst->in_vr, (size_t)inst->n_in, inst->in_val);
+        inst->in_valid = status <= fmi2Warning;
+    }
+    if (inst->fast_on && inst->in_valid) return fast_step(inst, t, h);
+    if (inst->in_dirty || inst->in_valid || inst->out_valid) {
+        fmi2Status flushed = before_forward(inst, 1);
+        if (flushed > fmi2Warning) return flushed;
+    }
+    return fmi.DoStep(inst->inner, t, h, noSetPrior);
+}
+
+EXPORT fmi2Status fmi2Terminate(fmi2Component c) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    fmi2Status flushed = before_forward(inst, 1);
+    inst->fast_on = 0;
+    if (flushed > fmi2Warning) return flushed;
+    return fmi.Terminate(inst->inner);
+}
+
+EXPORT fmi2Status fmi2Reset(fmi2Component c) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    drop_step(inst);            /* pythonfmu builds a new slave, which registers again */
+    registering = inst;
+    fmi2Status status = fmi.Reset(inst->inner);
+    registering = NULL;
+    return status;
+}
 
 /* The host's logging wish is the loader's filter; pythonfmu's own logging stays on (see pass_message). */
 EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n, const fmi2String categories[]) {
@@ -713,8 +1054,14 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     attach_thread();
     inst->direct_error = 0;
     inst->in_exit_initialization = 1;
-    fmi2Status status = fmi.ExitInitializationMode(inst->inner);
+    fmi2Status flushed = before_forward(inst, 1);
+    fmi2Status status = flushed > fmi2Warning ? flushed : fmi.ExitInitializationMode(inst->inner);
     inst->in_exit_initialization = 0;
+    if (status <= fmi2Warning && inst->step != NULL) {   /* initialised: the fast path is on */
+        inst->fast_on = 1;
+        inst->in_valid = inst->out_valid = 0;
+        inst->in_dirty = 0;
+    }
     return status == fmi2Fatal ? fmi2Error : status;
 }
 

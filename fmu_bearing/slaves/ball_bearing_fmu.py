@@ -19,6 +19,9 @@ This file is the FMU's slave module: pythonfmu's binary imports it as a top-leve
 the slave class by matching its source lines against a class statement deriving from Fmi2Slave, so
 it uses absolute imports only and no ``from __future__`` import.
 """
+import ctypes
+import glob
+import os
 from dataclasses import fields
 from functools import partial
 
@@ -65,6 +68,37 @@ _INTEGER_RANGES = {"n_balls": (3, None), "damping_model": (0, 2)}
 def read_capacity(resources) -> int:
     """Per-ball output capacity from the FMU's resources/build_options.json (DEFAULT_CAPACITY without one)."""
     return max(int(read_build_options(resources).get("max_balls", DEFAULT_CAPACITY)), 3)
+
+
+def register_fast_step(resources, step, log_queue, input_vrs, outputs) -> bool:
+    """Hand ``step(t, h, *inputs)`` to the FMU's loader (``bearingLoaderRegisterStep``,
+    fmu_bearing/native/loader.c) if the FMU's binary is the loader and it is instantiating this slave on
+    this thread: it then makes fmi2SetReal of the inputs, fmi2DoStep and fmi2GetReal of ``outputs``
+    ((value reference, index in what ``step`` returns)) one Python call per step instead of three through
+    pythonfmu; after a step that left messages in ``log_queue`` (pythonfmu's) it has pythonfmu send them,
+    as pythonfmu's fmi2DoStep would. The loader holds ``step`` until fmi2FreeInstance or fmi2Reset.
+    False: not registered (no loader, pythonfmu's binary alone, in-process): pythonfmu's path, with the
+    same results. (A helper of this module, not of fmu_bearing.slaves, which another change owns.)"""
+    if not resources:
+        return False
+    binaries = os.path.join(os.path.dirname(os.path.abspath(str(resources))), "binaries")
+    for path in sorted(glob.glob(os.path.join(binaries, "*", "*"))):
+        stem, ext = os.path.splitext(os.path.basename(path))
+        if ext not in (".so", ".dll", ".dylib") or stem.endswith("_pythonfmu"):
+            continue
+        try:
+            register = ctypes.PyDLL(path).bearingLoaderRegisterStep   # PyDLL: called with the GIL held
+        except (OSError, AttributeError):
+            continue
+        register.restype = ctypes.c_int
+        register.argtypes = [ctypes.py_object, ctypes.py_object, ctypes.POINTER(ctypes.c_uint), ctypes.c_int,
+                             ctypes.POINTER(ctypes.c_uint), ctypes.POINTER(ctypes.c_int), ctypes.c_int]
+        n_in, n_out = len(input_vrs), len(outputs)
+        if register(step, log_queue, (ctypes.c_uint * n_in)(*input_vrs), n_in,
+                    (ctypes.c_uint * n_out)(*(vr for vr, _ in outputs)),
+                    (ctypes.c_int * n_out)(*(k for _, k in outputs)), n_out):
+            return True
+    return False
 
 
 class _TypeAttributes:
@@ -174,6 +208,12 @@ class BallBearing(Fmi2Slave, BearingStepping):
         self._real_set = self._setters(Real, None)
         self._int_set = self._setters(Integer, None)
         self._bool_set = self._setters(Boolean, None)
+        # Last: the loader's fast path (one call per doStep; fmu_bearing/native/loader.c). Outputs: the
+        # Real fields of BearingForce, which _fast_step returns.
+        vr_of = {v.name: vr for vr, v in self.vars.items()}
+        self._fast_path = register_fast_step(
+            self.resources, self._fast_step, self.log_queue, _INPUT_VRS,
+            [(vr_of[name], k) for k, (name, unit, _) in enumerate(FORCE_OUTPUTS) if unit is not None])
 
     # --- registration helpers (build time and instantiation only) ------------------------------
     def _register(self, cls, name, start, description, type_attributes, **kwargs):
@@ -228,6 +268,13 @@ class BallBearing(Fmi2Slave, BearingStepping):
             self._error(f"doStep at t = {current_time!r} s refused: {reason}")
             return False  # pythonfmu 0.7: fmi2Discard; the outputs keep the values of the last good step
         return True
+
+    def _fast_step(self, current_time, step_size, e_x, e_y, v_x, v_y, omega_inner, omega_outer):
+        """fmi2SetReal of the six inputs and fmi2DoStep in one call (the loader's fast path): the step's
+        BearingForce (the outputs F_x ... max_ball_load), or None when the step is refused."""
+        self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer = (
+            e_x, e_y, v_x, v_y, omega_inner, omega_outer)
+        return self._force if self.do_step(current_time, step_size) else None
 
     def terminate(self):
         self._terminated, self._bearing = True, None   # a later doStep is refused (fmi2Discard, logged)

@@ -43,6 +43,8 @@ class BearingStepping:
     #: defaults of a slave without an accumulator / not terminated (the slaves set both per instance)
     _life = None
     _terminated = False
+    #: the BearingForce of the last good evaluation (the outputs F_x ... max_ball_load), None before one
+    _force = None
     #: the parameter variables: one per BearingParameters field, same name
     _param_names = tuple(f.name for f in fields(BearingParameters))
 
@@ -59,8 +61,8 @@ class BearingStepping:
             self._pending_error = None
             return reason
         w_i, w_o = self.omega_inner, self.omega_outer
-        try:
-            bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, w_i, w_o)
+        try:   # bearing.check_inputs, one call less
+            physics.check_joint_inputs(bearing.eccentricity_limit, self.e_x, self.e_y, self.v_x, self.v_y, w_i, w_o)
         except physics.BearingInputError as err:
             return str(err)
         if not step_size >= 0.0:
@@ -88,6 +90,7 @@ class BearingStepping:
          self.damping_xx, self.damping_xy, self.damping_yy, self.loaded_balls, self.max_ball_load) = r
         self.cage_angle = cage_angle
         self._loads[:] = self._scratch
+        self._force = r
         return None
 
     @staticmethod
