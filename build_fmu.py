@@ -192,7 +192,10 @@ if _cached:
     for _name, _module in _cached.items():
         if isinstance(getattr(_module, "__path__", None), list):
             _module.__path__[:] = [_os.path.join(_here, *_name.split("."))]
-        _sys.modules.setdefault(_name, _module)
+        if _name != __name__:   # this module is the new one: the cached one goes
+            _sys.modules.setdefault(_name, _module)
+    del _name, _module
+del _cached   # a module global on the import: would keep the cached modules (and the old shim) alive
 from {real} import {cls}
 '''
 
