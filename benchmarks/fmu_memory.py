@@ -17,7 +17,7 @@ cycles; ``tests/test_fuzz.py::test_memory_growth_of_a_long_lived_host`` asserts 
 
 Measured (2 shared cores, one run each, ``--fmu`` the FMU before and after the slave shim of issue 14):
 before, 593 kB per instantiate/free cycle (580 MB for 1,000), 602 kB per load/unload cycle (117 MB for
-200), 595 kB per master run (58 MB for 100); after, 1.9 kB, 2.9 kB and 9.5 kB (1.9 MB, 0.6 MB, 1.0 MB).
+200), 610 kB per master run (60 MB for 100); after, 1.9 kB, 3.0 kB and 10.7 kB (1.9 MB, 0.6 MB, 1.0 MB).
 What is left per instance is pythonfmu 0.7's: its class search keeps a list of the slave class's MRO and
 a few strings (docs/robustness.md, Memory).
 """
