@@ -300,12 +300,16 @@ def release_on_free(slave) -> None:
     if not names:
         return
     resources = str(slave.resources)
-    if not _LIVE.get(names):   # fmi2Reset: a new instance of the released class, no new fmi2Instantiate
+    if not _LIVE.get(names):
         modules = module_cache().pop(names, None)
-        if modules is not None:
+        home = type(slave).__module__
+        if modules is not None and home in modules and home not in sys.modules:
+            # fmi2Reset after the last free: a new instance of the released class, no new fmi2Instantiate
             for name, module in modules.items():
                 sys.modules.setdefault(name, module)
             sys.path.insert(0, resources)
+        # else a fresh import of the FMU's modules (a binary without the shim, e.g. pythonfmu3's): the cached
+        # copy is not this one and is dropped
     _LIVE[names] = _LIVE.get(names, 0) + 1
     release = weakref.finalize(slave, _release, names, resources)
     release.atexit = False
