@@ -40,6 +40,7 @@ except ImportError:  # running from a source tree that is not installed
     import fmu_bearing
 
 from fmu_bearing.native.build import SOURCE as LOADER_SOURCE, build_loader  # noqa: E402
+from fmu_bearing.slaves import MODULE_CACHE  # noqa: E402
 
 PACKAGE = Path(fmu_bearing.__file__).resolve().parent
 SLAVES = PACKAGE / "slaves"
@@ -130,7 +131,7 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
                                            documentation_folder=doc_dir, **spec.options)
             finally:
                 sys.path[:] = saved_path  # pythonfmu leaves the script's folder on sys.path
-            seal(fmu, max_balls)
+            seal(fmu, max_balls, shim=spec.fmi == 2)
             build_loader(fmu)  # native hosts: the loader becomes the FMU's binary (fmu_bearing/native)
             model_name = _model_name(fmu)
             if model_name != spec.name:
@@ -164,7 +165,45 @@ def _unsealed_imports(source: str, renames: dict[str, str]) -> list[str]:
     return found
 
 
-def seal(fmu: Path, max_balls: int) -> dict[str, str]:
+#: the slave module pythonfmu's fmi2Instantiate executes (``seal``, ``shim=True``); {names} is filled in
+SHIM = '''"""{model}'s slave module for pythonfmu 0.7: a shim written by build_fmu.py (issue 14).
+
+The slave class lives in {real}. pythonfmu's fmi2Instantiate imports this module and then executes its
+source once more to find the slave class; executing the full slave module there made new classes at every
+instantiation, which pythonfmu's class search keeps alive (it never releases the MRO lists it makes), and
+with them a whole copy of the FMU's modules per instance. Here only the class is imported: the same one
+every time. The class search is what finds this line:
+
+class {cls}(Fmi2Slave):
+"""
+import sys as _sys
+
+if locals() is not globals():
+    # pythonfmu's second execution: its class search releases this module's dict once although it only
+    # borrowed it (PyModule_GetDict); one more reference balances that, or the dict would be freed in use.
+    import ctypes as _ctypes
+    _ctypes.pythonapi.Py_IncRef(_ctypes.py_object(globals()))
+# The modules the last fmi2FreeInstance of this build removed (fmu_bearing.slaves.module_cache): back into
+# sys.modules, their packages pointed at this extraction, instead of a new import of every module.
+_cached = getattr(_sys, {cache!r}, {{}}).pop({names!r}, None)
+if _cached:
+    import os as _os
+    _here = _os.path.dirname(_os.path.abspath(__file__))
+    for _name, _module in _cached.items():
+        if isinstance(getattr(_module, "__path__", None), list):
+            _module.__path__[:] = [_os.path.join(_here, *_name.split("."))]
+        if _name != __name__:   # this module is the new one: the cached one goes
+            _sys.modules.setdefault(_name, _module)
+    del _name, _module
+del _cached   # a module global on the import: would keep the cached modules (and the old shim) alive
+from {real} import {cls}
+'''
+
+#: pythonfmu's (and the shim's) pattern of the slave class statement
+_SLAVE_CLASS = re.compile(r"^class (\w+)\(\s*Fmi2Slave\s*[,)]", re.M)
+
+
+def seal(fmu: Path, max_balls: int, shim: bool = False) -> dict[str, str]:
     """Rename the packages and the slave module packed in ``fmu`` to private names unique to the build.
 
     Rewrites the archive in place: ``resources/<package>/`` -> ``resources/_<package>_<hash>/`` for every
@@ -172,6 +211,10 @@ def seal(fmu: Path, max_balls: int) -> dict[str, str]:
     (and ``slavemodule.txt``), absolute imports of those names in every packed ``.py`` file, and the build
     options with the list of private module names. The hash (12 hex digits of SHA-256) is taken over the
     packed files, so the same sources give the same names. Returns {old name: private name}.
+
+    ``shim`` (pythonfmu 0.7 builds): when the slave script is also packed inside one of the packages, the
+    slave module becomes ``SHIM``, which imports the slave class from its private package module, so that
+    re-instantiating the FMU does not re-create the class (issue 14).
     """
     with zipfile.ZipFile(fmu) as z:
         entries = [(info, z.read(info)) for info in z.infolist()]
@@ -186,6 +229,18 @@ def seal(fmu: Path, max_balls: int) -> dict[str, str]:
     renames[slave] = f"{slave}_{tag}"
     options = {**json.loads(files[f"resources/{BUILD_OPTIONS_FILE}"]), "max_balls": int(max_balls),
                "private_modules": sorted(renames.values())}
+    shim_text = None
+    if shim:
+        source = files[f"resources/{slave}.py"]
+        inside = sorted(n for n in files if n.startswith("resources/") and n.count("/") >= 2
+                        and n.endswith(f"/{slave}.py") and files[n] == source)
+        found = _SLAVE_CLASS.search(source.decode("utf-8"))
+        if inside and found:
+            parts = inside[0][len("resources/"):-len(".py")].split("/")
+            real = ".".join([renames[parts[0]], *parts[1:]])
+            model = ElementTree.fromstring(files["modelDescription.xml"]).get("modelName")
+            shim_text = SHIM.format(model=model, real=real, cls=found.group(1), cache=MODULE_CACHE,
+                                    names=tuple(options["private_modules"]))
     tmp = fmu.with_name(fmu.name + ".sealing")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as out:
         for info, data in entries:
@@ -196,6 +251,8 @@ def seal(fmu: Path, max_balls: int) -> dict[str, str]:
                     parts[1] = renames[parts[1]]
                 elif name == f"resources/{slave}.py":
                     parts[1] = f"{renames[slave]}.py"
+                    if shim_text is not None:
+                        data = shim_text.encode("utf-8")
                 elif name == "resources/slavemodule.txt":
                     data = renames[slave].encode("utf-8")
                 elif name == f"resources/{BUILD_OPTIONS_FILE}":

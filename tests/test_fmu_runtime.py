@@ -166,6 +166,69 @@ def test_fmus_run_in_a_venv_with_only_fmpy(fmus, tmp_path, request):
     check_report(report, fmus)
 
 
+# A host script: instantiate/step/free BallBearing from one extraction, delete it, then again from a second
+# extraction; reports the forces, sys.path/sys.modules after each free, and whether the second instance ran the
+# modules of the first (the build's module cache, issue 14) or compiled them again.
+CACHE_HOST = textwrap.dedent("""
+    import json, os, shutil, sys
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+    fmu, first, second, e_x = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4])
+    compiled = []
+    sys.addaudithook(lambda event, args: compiled.append(str(args[1])) if event == "compile" else None)
+    path_before, modules_before = list(sys.path), set(sys.modules)
+    report = {"forces": [], "clean_after_free": [], "compiled_private": []}
+    package = None
+    for unzip in (first, second):
+        extract(fmu, unzipdir=unzip)
+        md = read_model_description(unzip)
+        private = json.load(open(unzip + "/resources/build_options.json"))["private_modules"]
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        s = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName="cache")
+        del compiled[:]
+        s.instantiate(loggingOn=False)
+        report["compiled_private"].append(
+            sorted({os.path.basename(c) for c in compiled if os.path.join("resources", "_") in c}))
+        name = next(n for n in private if n.startswith("_fmu_bearing_"))
+        if package is None:
+            package, report["package"] = sys.modules[name], name
+        else:
+            report["same_package"] = sys.modules[name] is package
+            report["package_path"] = list(package.__path__)
+        s.setupExperiment(startTime=0.0); s.enterInitializationMode()
+        s.setReal([vr["e_x"]], [e_x]); s.exitInitializationMode(); s.doStep(0.0, 1e-4)
+        report["forces"].append(s.getReal([vr["F_x"], vr["F_y"]]))
+        s.terminate(); s.freeInstance()
+        left = sorted(m for m in sys.modules if m.split(".")[0] in private)
+        report["clean_after_free"].append(sys.path == path_before and not left
+                                          and not (set(sys.modules) - modules_before) & set(private))
+        shutil.rmtree(unzip)
+    print(json.dumps(report))
+""")
+
+
+def test_reinstantiation_reuses_the_builds_modules_and_leaves_the_host_clean(ball_bearing_fmu, tmp_path):
+    """Issue 14 (memory) without giving up issue 13.4 (sealing): after the last fmi2FreeInstance the FMU's
+    modules have left sys.modules and its folder sys.path; a later instance, from another extraction (the first
+    one deleted), runs the same module objects again (nothing of the private package is compiled a second
+    time), their package path pointing at the new extraction, and gives the same force."""
+    script = tmp_path / "cache_host.py"
+    script.write_text(CACHE_HOST)
+    first, second = tmp_path / "first", tmp_path / "second"
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    proc = subprocess.run([sys.executable, str(script), str(ball_bearing_fmu), str(first), str(second), str(E_X)],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    report = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert report["forces"] == [expected_forces()["BallBearing"]] * 2
+    assert report["clean_after_free"] == [True, True]
+    assert "ball_bearing.py" in report["compiled_private"][0]     # the first instance imports the package ...
+    assert report["compiled_private"][1] == []                      # ... the second one does not
+    assert report["same_package"] is True
+    assert report["package_path"] == [str(second / "resources" / report["package"])]
+
+
 # --- errors: a cause, a category, also with logging off ----------------------------------------------
 
 class Host:
@@ -328,7 +391,8 @@ def test_non_error_messages_follow_the_hosts_logging_and_categories(ball_bearing
     only while the host has logging on (fmi2Instantiate, fmi2SetDebugLogging) and in its categories."""
     s, vr, messages, callbacks = _fmpy_host(ball_bearing_fmu, tmp_path / "x", logging_on=False)
     try:
-        module = next(m for n, m in sys.modules.items() if n.startswith("ball_bearing_fmu_"))
+        shim = next(m for n, m in sys.modules.items() if n.startswith("ball_bearing_fmu_"))
+        module = sys.modules[shim.BallBearing.__module__]   # the slave module in the FMU's private package
         status = module.Fmi2Status
         original = module.BallBearing.do_step
 

@@ -591,5 +591,32 @@ def test_fuzz_every_malformed_case_is_refused_and_none_crashes(fuzz_inputs):
     assert not failed, f"{len(failed)} cases not refused properly:\n" + "\n".join(failed[:30])
 
 
+# ------------------------------------------------------------------------------------------ memory
+#: issue 14's targets: (cycles, RSS growth limit [MB]) per phase of benchmarks/fmu_memory.py (about 10 s)
+MEMORY_LIMITS = {"instantiate_free": (1000, 5.0), "load_unload": (200, 10.0)}
+
+
+def test_memory_growth_of_a_long_lived_host(ball_bearing_fmu):
+    """Issue 14's memory targets: 1,000 instantiate/free cycles of BallBearing.fmu in one process grow its
+    resident memory by <= 5 MB, 200 FmuEndpoint load/unload cycles by <= 10 MB (each phase warms up first;
+    before the slave shim each cycle kept ~590 kB, 580 MB in all). In a subprocess: the measured process
+    is not pytest's, and a crash fails the test."""
+    code = ("import json, runpy, sys; from pathlib import Path\n"
+            "bench = runpy.run_path(sys.argv[1]); fmu = Path(sys.argv[2])\n"
+            "print(json.dumps({name: bench[name](fmu, int(n)) for name, n in zip(sys.argv[3::2], sys.argv[4::2])}))")
+    args = [str(ROOT / "benchmarks" / "fmu_memory.py"), str(ball_bearing_fmu)]
+    for name, (cycles, _) in MEMORY_LIMITS.items():
+        args += [name, str(cycles)]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-c", code, *args], cwd=ROOT, env=env, capture_output=True, text=True,
+                          timeout=900)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    measured = json.loads(proc.stdout.strip().splitlines()[-1])
+    for name, (cycles, limit) in MEMORY_LIMITS.items():
+        before, after = measured[name]
+        print(f"{name}: {cycles} cycles, RSS {before:.1f} -> {after:.1f} MB ({after - before:+.2f} MB)")
+        assert after - before <= limit, f"{name}: {cycles} cycles grew the RSS by {after - before:.2f} MB > {limit} MB"
+
+
 if __name__ == "__main__":
     sys.exit(worker_main(*sys.argv[1:4]))

@@ -258,8 +258,17 @@ def _call_python(printer, environment, name, status, category, message):
 BUILD_OPTIONS_FILE = "build_options.json"
 #: live instances per sealed FMU build, keyed by its private module names
 _LIVE = {}
-#: what the last free of a build removed: restored if pythonfmu builds a new instance of the same class (fmi2Reset)
-_RELEASED = {}
+#: attribute of ``sys`` that holds, per sealed build (its private module names), the modules its last free
+#: removed from ``sys.modules``; the build's slave shim (build_fmu.py, ``SHIM``) puts them back at the next
+#: fmi2Instantiate instead of importing them again (issue 14). It lives on ``sys`` because it must outlive
+#: the FMU's own modules, which have left ``sys.modules`` and ``sys.path`` by then.
+MODULE_CACHE = "_sealed_fmu_modules"
+
+
+def module_cache() -> dict:
+    """{private module names of a build: {name: module}}: the released modules of every sealed build (one
+    copy per build and process, whatever the number of instantiations; see ``MODULE_CACHE``)."""
+    return sys.__dict__.setdefault(MODULE_CACHE, {})
 
 
 def read_build_options(resources) -> dict:
@@ -281,18 +290,26 @@ def release_on_free(slave) -> None:
     (``build_options.json``: ``private_modules``), so the modules it added are exactly those names: at the
     free of the last instance they are removed from ``sys.modules`` and one ``sys.path`` entry per
     instance is removed. Standard-library modules imported on the way stay (they are the host's own).
-    Needs the slave to be free of reference cycles (``weak_accessors``): it is released when
-    fmi2FreeInstance drops pythonfmu's reference. No-op in-process (no resources) and for unsealed builds.
+    The removed module objects are kept in ``module_cache()``: the build's slave shim puts them back at the
+    next fmi2Instantiate, so one process imports an FMU's code once, not once per instance (issue 14: every
+    re-import left a whole copy of the package behind). Needs the slave to be free of reference cycles
+    (``weak_accessors``): it is released when fmi2FreeInstance drops pythonfmu's reference. No-op
+    in-process (no resources) and for unsealed builds.
     """
     names = tuple(read_build_options(slave.resources).get("private_modules", ()))
     if not names:
         return
     resources = str(slave.resources)
-    if not _LIVE.get(names) and names in _RELEASED:   # fmi2Reset: a new instance of the released class
-        modules, entry = _RELEASED.pop(names)
-        for name, module in modules.items():
-            sys.modules.setdefault(name, module)
-        sys.path.insert(0, entry)
+    if not _LIVE.get(names):
+        modules = module_cache().pop(names, None)
+        home = type(slave).__module__
+        if modules is not None and home in modules and home not in sys.modules:
+            # fmi2Reset after the last free: a new instance of the released class, no new fmi2Instantiate
+            for name, module in modules.items():
+                sys.modules.setdefault(name, module)
+            sys.path.insert(0, resources)
+        # else a fresh import of the FMU's modules (a binary without the shim, e.g. pythonfmu3's): the cached
+        # copy is not this one and is dropped
     _LIVE[names] = _LIVE.get(names, 0) + 1
     release = weakref.finalize(slave, _release, names, resources)
     release.atexit = False
@@ -312,7 +329,7 @@ def _release(names, resources) -> None:
                if name in names or name.startswith(prefixes)}
     if resources not in sys.path:
         sys.path_importer_cache.pop(resources, None)
-    _RELEASED[names] = (removed, resources)
+    module_cache()[names] = removed
 
 
 #: extra references that balance pythonfmu 0.7's over-release on the exception path (see above)
