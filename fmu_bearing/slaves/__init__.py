@@ -221,26 +221,38 @@ def _loader_host_callbacks(resources, environment):
     went to the host directly) when ``environment`` is one of the FMU loader's instances
     (``bearingLoaderHostCallbacks``/``bearingLoaderDirectError`` of fmu_bearing/native/loader.c, the FMU's
     binary), else (0, None)."""
-    if not resources or not environment:
+    if not environment:
         return 0, None
-    binaries = os.path.join(os.path.dirname(os.path.abspath(resources)), "binaries")
-    for path in sorted(glob.glob(os.path.join(binaries, "*", "*"))):
-        stem, ext = os.path.splitext(os.path.basename(path))
-        if ext not in (".so", ".dll", ".dylib") or stem.endswith("_pythonfmu"):
-            continue
-        try:
-            function = ctypes.CDLL(path).bearingLoaderHostCallbacks
-        except (OSError, AttributeError):
+    for library in loader_libraries(resources, ctypes.CDLL):
+        function = getattr(library, "bearingLoaderHostCallbacks", None)
+        if function is None:
             continue
         function.restype, function.argtypes = ctypes.c_void_p, [ctypes.c_void_p]
         found = function(ctypes.c_void_p(environment))
         if found:
-            note = getattr(ctypes.CDLL(path), "bearingLoaderDirectError", None)
+            note = getattr(library, "bearingLoaderDirectError", None)
             if note is not None:
                 note.restype, note.argtypes = None, [ctypes.c_void_p]
                 note = partial(note, ctypes.c_void_p(environment))
             return int(found), note
     return 0, None
+
+
+def loader_libraries(resources, kind=ctypes.CDLL):
+    """The FMU's own binaries beside ``resources`` other than pythonfmu's (``*_pythonfmu``): the loader
+    (fmu_bearing/native/loader.c) when the FMU has one, opened as ``kind`` (ctypes.CDLL, or ctypes.PyDLL for
+    functions called with the GIL held). The host has loaded it already, so this returns the same handle."""
+    if not resources:
+        return
+    binaries = os.path.join(os.path.dirname(os.path.abspath(str(resources))), "binaries")
+    for path in sorted(glob.glob(os.path.join(binaries, "*", "*"))):
+        stem, ext = os.path.splitext(os.path.basename(path))
+        if ext not in (".so", ".dll", ".dylib") or stem.endswith("_pythonfmu"):
+            continue
+        try:
+            yield kind(path)
+        except OSError:
+            continue
 
 
 def _call_native(function, environment, name, status, category, message):

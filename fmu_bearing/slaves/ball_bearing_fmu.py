@@ -20,8 +20,6 @@ the slave class by matching its source lines against a class statement deriving 
 it uses absolute imports only and no ``from __future__`` import.
 """
 import ctypes
-import glob
-import os
 from dataclasses import fields
 from functools import partial
 
@@ -34,8 +32,8 @@ from fmu_bearing import life
 from fmu_bearing.parameters import BearingParameters, validate
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
 from fmu_bearing.slaves import (INVALID_STATE, HostLogger, add_initial_unknowns, add_unit_definitions,
-                                guard_pythonfmu_exit, hold_before_raise, read_build_options, refuse_state,
-                                release_on_free, state_from_bytes, weak_accessors)
+                                guard_pythonfmu_exit, hold_before_raise, loader_libraries, read_build_options,
+                                refuse_state, release_on_free, state_from_bytes, weak_accessors)
 from fmu_bearing.slaves.state import check_state, variable_kinds
 from fmu_bearing.slaves.stepping import LIFE_STATE, BearingStepping, ignore_value, life_output
 
@@ -78,17 +76,10 @@ def register_fast_step(resources, step, log_queue, input_vrs, outputs) -> bool:
     pythonfmu; after a step that left messages in ``log_queue`` (pythonfmu's) it has pythonfmu send them,
     as pythonfmu's fmi2DoStep would. The loader holds ``step`` until fmi2FreeInstance or fmi2Reset.
     False: not registered (no loader, pythonfmu's binary alone, in-process): pythonfmu's path, with the
-    same results. (A helper of this module, not of fmu_bearing.slaves, which another change owns.)"""
-    if not resources:
-        return False
-    binaries = os.path.join(os.path.dirname(os.path.abspath(str(resources))), "binaries")
-    for path in sorted(glob.glob(os.path.join(binaries, "*", "*"))):
-        stem, ext = os.path.splitext(os.path.basename(path))
-        if ext not in (".so", ".dll", ".dylib") or stem.endswith("_pythonfmu"):
-            continue
-        try:
-            register = ctypes.PyDLL(path).bearingLoaderRegisterStep   # PyDLL: called with the GIL held
-        except (OSError, AttributeError):
+    same results."""
+    for library in loader_libraries(resources, ctypes.PyDLL):   # PyDLL: called with the GIL held
+        register = getattr(library, "bearingLoaderRegisterStep", None)
+        if register is None:
             continue
         register.restype = ctypes.c_int
         register.argtypes = [ctypes.py_object, ctypes.py_object, ctypes.POINTER(ctypes.c_uint), ctypes.c_int,
