@@ -37,7 +37,7 @@ import numpy as np
 
 from mechanism.cosim.coupling import DEFAULT_SCHEME, Exchanged, make_scheme
 from mechanism.cosim.coupling.implicit import onset_jumps
-from mechanism.cosim.energy import ENERGY_COLUMNS, EnergyAccount
+from mechanism.cosim.energy import ENERGY_COLUMNS, EnergyAccount, kinematic_cage_angle
 from mechanism.cosim.joint import BearingLink
 from mechanism.cosim.record import BASE_COLUMNS, Recorder, RunResult
 from mechanism.multibody.integrators import rk4_step
@@ -116,9 +116,18 @@ class CouplingLoop:
     def __init__(self, system: System, settings: MasterSettings, observe: Observer,
                  link: BearingLink | None = None, endpoint: Endpoint | None = None,
                  reaction_force: Callable[[np.ndarray, np.ndarray], tuple[float, float]] | None = None,
-                 energy: EnergyAccount | None = None):
+                 energy: EnergyAccount | None = None, contact_law=None):
         self.system, self.settings, self.observe = system, settings, observe
         self.energy = energy
+        #: the ball-bearing law (``BallBearing``) an iterative scheme locates contact onsets with
+        #: (``onset_jumps``): ``contact_law``, else the energy account's, else the in-process endpoint's.
+        #: Part of the physics: never depends on whether an energy account is recorded.
+        if contact_law is None and energy is not None:
+            contact_law = energy.bearing
+        if contact_law is None:
+            contact_law = getattr(endpoint, "bearing", None)
+        self.contact_law = contact_law if link is not None else None
+        self._angles0 = (0.0, 0.0)
         self.link, self.endpoint, self.reaction_force = link, endpoint, reaction_force
         self.sample_names = list(endpoint.sample_names) if endpoint is not None else []
         # a step whose end is sampled may fetch the samples with the coupling outputs (FmuEndpoint)
@@ -250,6 +259,8 @@ class CouplingLoop:
         if self.endpoint is None:
             return
         n, link = self.n, self.link
+        if self.contact_law is not None:
+            self._angles0 = link.ring_angles(y[:n])
         u = tuple(self._u.tolist()) if self.kernels else link.inputs(y[:n], y[n:])
         out = self.endpoint.initialize(u)
         self.inputs, self.force = u, out[:2]
@@ -338,9 +349,9 @@ class CouplingLoop:
         if scheme is None or not scheme.iterative:
             return self.advance(y, t0, h, step, t, rec)
         stats, limit = self.iterations, max(2, self.settings.max_iterations)
-        energy, n = self.energy, self.n
+        law, n = self.contact_law, self.n
         start = scheme.past[-1]
-        cage_start = energy.cage_angle(y[:n]) if energy is not None else 0.0
+        cage_start = self.cage_angle(y[:n]) if law is not None else 0.0
         snap = self.snapshot()
         previous = None
         try:
@@ -354,8 +365,7 @@ class CouplingLoop:
                     stats["not_converged"] += 1
                     break
                 previous = end
-                jumps = () if energy is None else onset_jumps(energy.bearing, start, cage_start, end,
-                                                              energy.cage_angle(y_end[:n]))
+                jumps = () if law is None else onset_jumps(law, start, cage_start, end, self.cage_angle(y_end[:n]))
                 self.restore(snap)
                 scheme.set_trial(end, jumps)
         finally:
@@ -367,6 +377,11 @@ class CouplingLoop:
         if rec is not None:                          # the sample of the accepted (last) pass
             self.record(rec, t if t is not None else t0 + h, y_end)
         return y_end
+
+    def cage_angle(self, q: np.ndarray) -> float:
+        """The kinematic cage angle [rad] at q (``energy.kinematic_cage_angle``; needs ``contact_law``)."""
+        return kinematic_cage_angle(self.contact_law, self.link, self._angles0, q)
+
     def record(self, rec: Recorder, t: float, y: np.ndarray) -> None:
         """Append the sample at time t of the state y (the last one ``start``/``advance`` reached) to ``rec``."""
         if not self.kernels:
@@ -430,10 +445,12 @@ class CouplingLoop:
 def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: MasterSettings,
                observe: Observer, link: BearingLink | None = None, endpoint: Endpoint | None = None,
                reaction_force: Callable[[np.ndarray, np.ndarray], tuple[float, float]] | None = None,
-               meta: dict | None = None, energy: EnergyAccount | None = None) -> RunResult:
+               meta: dict | None = None, energy: EnergyAccount | None = None, contact_law=None) -> RunResult:
     """Integrate the mechanism from (q0, qd0) to ``settings.t_end``, co-simulated with ``endpoint`` if given.
 
     ``energy``: an energy account (``mechanism.cosim.energy``) updated at every sample, adding its columns.
+    ``contact_law``: the bearing's ``BallBearing`` for the iterated scheme's contact-onset correction (default:
+    the energy account's or the in-process endpoint's; a run through an FMU without either gets none).
 
     For the ideal joint pass ``link=endpoint=None`` and ``reaction_force(q, lam)`` giving the
     joint's force on the housing body, recorded as F_x, F_y.
@@ -441,7 +458,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     h = settings.step
     n_steps = int(round(settings.t_end / h))
     every = max(1, int(round(settings.output_interval / h)))
-    loop = CouplingLoop(system, settings, observe, link, endpoint, reaction_force, energy)
+    loop = CouplingLoop(system, settings, observe, link, endpoint, reaction_force, energy, contact_law)
     rec = Recorder(loop.columns, n_steps // every + 2)
     info = dict(meta or {})
     info.update(step_s=h, output_interval_s=every * h, t_end_s=n_steps * h,
