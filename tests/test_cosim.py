@@ -57,9 +57,10 @@ def test_default_scheme_meets_the_1_percent_target_through_the_fmu(reference_2re
     for key in ("peak_joint_force_N", "max_eccentricity_m", "max_ball_load_N"):
         assert abs(got[key] / ref[key] - 1.0) < 0.01, (key, got[key], ref[key])
     assert got["max_constraint_violation_m"] < 1e-9
-    # the default (jacobian-implicit) repeats each step until it converges: 2 passes or more, counted
+    # the default (jacobian-implicit) repeats a step until it converges or a further pass is predicted to change
+    # it by less than the tolerance (iterate_where_needed): passes counted, one component call each
     assert r.meta["component_calls"] == round(r.meta["iteration_passes_mean"] * 10000)
-    assert r.meta["iteration_passes_mean"] >= 2.0
+    assert 1.0 < r.meta["iteration_passes_mean"] < 3.0 and r.meta["iteration_predicted"] > 0
 
 
 def test_fmu_and_in_process_paths_agree(ball_bearing_fmu):
