@@ -272,11 +272,13 @@ class CouplingLoop:
             self.mobility = link.mobility(y[:n], 0.0)
 
     def advance(self, y: np.ndarray, t0: float, h: float, step: int, t: float | None = None,
-                rec: Recorder | None = None) -> np.ndarray:
+                rec: Recorder | None = None, finish: bool = True) -> np.ndarray:
         """One communication step [t0, t0 + h] from state y; returns the state at its end.
 
         ``t`` is the end time (default t0 + h; the fixed-step loop passes step * h). With ``rec`` the
         sample at the end of the step is appended to it (as ``record`` would, sharing its evaluation).
+        ``finish=False`` (a pass of an iterated step, compiled path): the end-state evaluation is left to the
+        caller (``communicate`` does it once, for the accepted pass).
         Raises ``RunFailure`` (``step`` names it) or the component's error.
         """
         if t is None:
@@ -337,7 +339,8 @@ class CouplingLoop:
             scheme.push(Exchanged(t, *used[:4], *out))
             self.inputs, self.force = u, out[:2]
         if self.kernels:
-            self._finish_state(y, t, rec)
+            if finish:
+                self._finish_state(y, t, rec)
         elif rec is not None:
             rec.add(self.row(t, y))
         return y
@@ -358,9 +361,12 @@ class CouplingLoop:
         snap = self.snapshot()
         previous = None
         predict = self.settings.iterate_where_needed
+        # the passes do not evaluate their end state (finish=False): _dy, _lam stay the start state's, every
+        # pass's first RK4 stage (the end of the accepted pass is evaluated once, below)
+        start_end = self._end if self.kernels else None
         try:
             for passes in range(1, limit + 1):
-                y_end = self.advance(y, t0, h, step, t)
+                y_end = self.advance(y, t0, h, step, t, finish=False)
                 end = scheme.past[-1]
                 if previous is not None and scheme.converged(
                         previous, end, self.settings.iteration_tol, max(1e-6, math.hypot(end.e_x, end.e_y))):
@@ -375,6 +381,8 @@ class CouplingLoop:
                     break
                 previous = end
                 self.restore(snap)
+                if self.kernels:
+                    self._end = start_end
                 scheme.set_trial(end, jumps)
         finally:
             scheme.set_trial(None)
@@ -382,8 +390,11 @@ class CouplingLoop:
         stats["steps"] += 1
         stats["passes"] += passes
         stats["max_passes"] = max(stats["max_passes"], passes)
-        if rec is not None:                          # the sample of the accepted (last) pass
-            self.record(rec, t if t is not None else t0 + h, y_end)
+        t_end = t if t is not None else t0 + h
+        if self.kernels:      # W and u hold the accepted pass's end kinematics: one evaluation, sample and next k1
+            self._finish_state(y_end, t_end, rec)
+        elif rec is not None:                        # the sample of the accepted (last) pass
+            self.record(rec, t_end, y_end)
         return y_end
 
     def _next_pass_negligible(self, scheme, b: Exchanged, t0: float, h: float) -> bool:
