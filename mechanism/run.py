@@ -151,6 +151,12 @@ def clearance_per_side(config: RunConfig) -> float:
     return 0.0
 
 
+def contact_law(config: RunConfig) -> BallBearing | None:
+    """The ball bearing's law for the iterated scheme's contact-onset correction (None for the journal-clearance
+    joint): given to the master whether or not an energy account is recorded (the physics must not depend on it)."""
+    return BallBearing(bearing_parameters(config.component_settings)) if config.joint == "bearing" else None
+
+
 def energy_account(config: RunConfig, system: System, link: BearingLink) -> EnergyAccount | None:
     """The run's energy account (``mechanism.cosim.energy``): the ball bearing's law in-process; None for
     the journal-clearance joint (its account is not implemented)."""
@@ -265,7 +271,7 @@ def _run(config: RunConfig) -> RunResult:
         meta["fmu"] = str(path)
     try:
         return run_master(system, q0, qd0, settings, observe, link=link, endpoint=endpoint, meta=meta,
-                          energy=energy_account(config, system, link))
+                          energy=energy_account(config, system, link), contact_law=contact_law(config))
     finally:
         endpoint.close()
 
@@ -297,7 +303,7 @@ def run_adaptive(config, tol: float, initial_step: float | None = None, **settin
     start = time.perf_counter()
     try:
         result = run_adaptive_master(system, q0, qd0, adaptive, observe, link, endpoint, meta,
-                                     energy=energy_account(config, system, link))
+                                     energy=energy_account(config, system, link), contact_law=contact_law(config))
     finally:
         endpoint.close()
     result.meta["wall_time_s"] = time.perf_counter() - start

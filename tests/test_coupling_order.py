@@ -89,7 +89,7 @@ def test_secant_and_iterated_schemes_through_the_fmu(ball_bearing_fmu):
         for col in ("F_x", "F_y", "e_x", "cage_angle", "energy_residual"):
             scale = max(1e-30, float(np.max(np.abs(b[col]))))
             assert np.max(np.abs(a[col] - b[col])) <= 1e-9 * scale, (scheme, col)
-    assert a.meta["iteration_passes_mean"] >= 2.0
+    assert a.meta["iteration_passes_mean"] > 1.0
     assert a.meta["iteration_not_converged"] == 0
     assert a.meta["component_calls"] == round(a.meta["iteration_passes_mean"] * 250)
 
@@ -176,3 +176,40 @@ def test_monolithic_reference_figures_do_not_move_with_its_tolerance():
             continue
         fine = figures[1][key]
         assert abs(coarse - fine) <= 1e-3 * abs(fine), (key, coarse, fine)
+
+
+def _implicit_master(t_end: float, **settings):
+    from mechanism.cosim.endpoints import InProcessEndpoint
+    from mechanism.cosim.joint import BearingLink
+    from mechanism.cosim.master import MasterSettings, run_master
+    from mechanism.multibody.solver import System
+    from mechanism.systems import slider_crank
+    p = slider_crank.SliderCrankParameters(rpm=1200)
+    model = slider_crank.build(p, "bearing")
+    system = System(model)
+    q0, qd0 = slider_crank.initial_state(system, p)
+    ms = MasterSettings(t_end=t_end, step=1e-5, scheme="jacobian-implicit", progress=False, **settings)
+    r = run_master(system, q0, qd0, ms, slider_crank.slider_crank_observer(system), BearingLink(system, model.bearings[0]),
+                   InProcessEndpoint(DAMPING))
+    assert r.ok, r.message
+    return r
+
+
+def test_iterating_only_where_needed_stays_at_the_fixed_point():
+    """``iterate_where_needed`` (default) accepts a pass when the predicted change of a further pass is within
+    iteration_tol (1e-7) instead of repeating until two passes agree. Over the start-up impacts (0.4 revolution
+    at 1200 rpm, h = 1e-5 s) it saves passes (measured 2.92 -> 2.05 per step; each saved pass is an FMU
+    rollback) and stays within 1e-4 relative of the fixed point iterated to 1e-12 (measured, largest value of
+    each column: F_x 5.9e-6, F_y 3.1e-5, e_y 2.1e-5, crank moment 1.1e-5; the old rule 5e-8 ... 1.5e-7), below
+    the scheme's own error at this step (rev-2 pointwise force 5.0e-4, docs/coupling.md); the accuracy tests
+    of the scheme (order, stability, 1 % targets) are unchanged and pass."""
+    t_end = 0.02
+    tight = _implicit_master(t_end, iteration_tol=1e-12, iterate_where_needed=False, max_iterations=20)
+    old = _implicit_master(t_end, iterate_where_needed=False)
+    new = _implicit_master(t_end)
+    assert new.meta["iteration_passes_mean"] < old.meta["iteration_passes_mean"] - 0.5, (new.meta, old.meta)
+    assert new.meta["iteration_predicted"] > 0 and new.meta["iteration_not_converged"] == 0
+    for c in ("F_x", "F_y", "e_x", "e_y", "slider_a", "crank_moment"):
+        scale = float(np.max(np.abs(tight[c])))
+        print(c, float(np.max(np.abs(new[c] - tight[c]))) / scale, float(np.max(np.abs(old[c] - tight[c]))) / scale)
+        assert np.max(np.abs(new[c] - tight[c])) <= 1e-4 * scale, c

@@ -96,7 +96,7 @@ LEVELS = 30
 
 def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: AdaptiveSettings,
                  observe: Observer, link: BearingLink, endpoint, meta: dict | None = None,
-                 energy=None) -> RunResult:
+                 energy=None, contact_law=None) -> RunResult:
     """Integrate to ``settings.t_end`` with adaptive communication steps and rollback (see the module docstring).
 
     ``endpoint`` must offer ``get_state``/``set_state``/``free_state`` (``FmuEndpoint`` needs an FMU
@@ -105,7 +105,7 @@ def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Adap
     dt_out = settings.output_interval
     n_out = int(round(settings.t_end / dt_out))
     h_max = min(settings.h_max or dt_out, dt_out)
-    loop = CouplingLoop(system, settings, observe, link, endpoint, energy=energy)
+    loop = CouplingLoop(system, settings, observe, link, endpoint, energy=energy, contact_law=contact_law)
     rec = Recorder(loop.columns, n_out + 2)
     info = dict(meta or {})
     info.update(output_interval_s=dt_out, t_end_s=n_out * dt_out, scheme="adaptive", inner_scheme=loop.scheme.name,

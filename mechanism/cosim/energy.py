@@ -44,6 +44,15 @@ ENERGY_COLUMNS = ("contact_energy", "damping_dissipation", "drive_work", "cage_w
                   "energy_residual")
 
 
+def kinematic_cage_angle(bearing: BallBearing, link: BearingLink, angles0: tuple[float, float],
+                         q: np.ndarray) -> float:
+    """The kinematic cage angle [rad] at q: cage_0 plus eq. (16) applied to the changes of the ring angles
+    since ``angles0`` (``link.ring_angles`` at the start). Used by the energy account and by the master to
+    locate contact onsets (``coupling.implicit.onset_jumps``), with or without an account."""
+    aj, ai = link.ring_angles(q)
+    return float(bearing.params.cage_angle_start + bearing.cage_velocity(aj - angles0[0], ai - angles0[1]))
+
+
 @dataclass
 class EnergyAccount:
     """Running energy account, updated at every sample (``update``) with the trapezoidal rule."""
@@ -60,9 +69,7 @@ class EnergyAccount:
 
     def cage_angle(self, q: np.ndarray) -> float:
         """The kinematic cage angle [rad]: cage_0 plus eq. (16) applied to the ring angles' changes."""
-        aj, ai = self.link.ring_angles(q)
-        return float(self.bearing.params.cage_angle_start
-                     + self.bearing.cage_velocity(aj - self._angles0[0], ai - self._angles0[1]))
+        return kinematic_cage_angle(self.bearing, self.link, self._angles0, q)
 
     def _forces(self, ex, ey, vx, vy, cage, wi, wo) -> tuple[float, float, float, float, float]:
         """(F_x, F_y) of the law, (F_x, F_y) at v = 0 (the elastic part) and the contact energy V [J],
