@@ -289,6 +289,33 @@ def test_three_instances_in_one_process_stay_independent(fmu):
 
 # --- FMU state ---------------------------------------------------------------------------------
 
+def test_a_state_saved_before_initialisation_gets_the_complete_check_after_it(fmu):
+    """fmi2SetFMUstate restores the instance's own in-memory states without re-checking them only when they
+    were saved since its initialisation (the masters' rollback); a state saved before it, with other
+    parameters, is still refused (parameters are fixed after initialisation), and nothing is assigned."""
+    inst = Instance(fmu, params={"n_balls": 8}, inputs=(2e-5, 0.0, 1e-3, 0.0, 125.0, 0.0), initialise=False)
+    try:
+        before = inst.s.getFMUstate()                    # n_balls = 8, not initialised
+        inst.set("n_balls", 9)
+        inst.s.exitInitializationMode()
+        inst.s.doStep(0.0, 1e-5)
+        now = inst.outputs()
+        inst.s.setFMUstate(before)
+        assert "n_balls" in inst.messages[-1][1] and "refused" in inst.messages[-1][1], inst.messages[-1]
+        np.testing.assert_array_equal(inst.outputs(), now)
+        with pytest.raises(FMICallException):
+            inst.s.doStep(1e-5, 1e-5)                    # the refusal is reported by the next step
+        own = inst.s.getFMUstate()                       # saved since initialisation: restored at once
+        inst.set_inputs((3e-5, 0.0, 0.0, 0.0, 125.0, 0.0))
+        inst.s.doStep(1e-5, 1e-5)
+        inst.s.setFMUstate(own)
+        np.testing.assert_array_equal(inst.outputs(), now)
+        inst.s.freeFMUstate(own)
+        inst.s.freeFMUstate(before)
+    finally:
+        inst.free()
+
+
 def test_state_get_set_and_serialize_round_trip(fmu):
     params = {"damping_model": 2, "n_balls": 9}
     rng = np.random.default_rng(12)

@@ -92,6 +92,20 @@ def register_fast_step(resources, step, log_queue, input_vrs, outputs) -> bool:
     return False
 
 
+class _SavedState(dict):
+    """A state as fmi2GetFMUstate saved it (a dict of every registered variable plus the life sums), with the
+    physics object of the instance that saved it (``bearing``; None before initialisation).
+
+    fmi2SetFMUstate of a state that this instance saved while initialised, and that was never serialized,
+    skips the complete check (``_state_problem``: ~0.2 ms, half the cost of a master's rollback): the host
+    cannot change an in-memory state (an opaque pointer), its values were this instance's own, and the
+    parameters of an initialised instance are fixed (the same ``bearing`` object proves both are the same
+    initialisation). Every other state -- deserialized (a plain dict), saved before initialisation, or
+    from another instance -- gets the complete check."""
+
+    __slots__ = ("bearing",)
+
+
 class _TypeAttributes:
     """Mixin: extra attributes (unit, min, max) on the <Real>/<Integer> element, which pythonfmu 0.7 omits."""
 
@@ -332,8 +346,9 @@ class BallBearing(Fmi2Slave, BearingStepping):
     # --- FMU state: pythonfmu saves every registered variable (inputs, outputs incl. cage_angle, parameters);
     # the life accumulator's sums are added under LIFE_STATE
     def _get_fmu_state(self):
-        state = super()._get_fmu_state()
+        state = _SavedState((var.name, var.getter()) for var in self.vars.values())
         state.update(self._life_state())
+        state.bearing = self._bearing
         return state
 
     @staticmethod
@@ -345,7 +360,10 @@ class BallBearing(Fmi2Slave, BearingStepping):
         """Restore a state after checking all of it (``fmu_bearing.slaves.state``); a state that is not ours
         is refused with a logged error, the next doStep is refused, and nothing is assigned."""
         try:
-            problem = self._state_problem(state)
+            # this instance's own in-memory state, saved since initialisation (the iterated and adaptive
+            # masters' rollback, once per step): its values can only be the instance's own valid ones
+            own = type(state) is _SavedState and state.bearing is not None and state.bearing is self._bearing
+            problem = None if own else self._state_problem(state)
         except Exception as err:  # no exception may reach pythonfmu's C++ side
             problem = f"not a BallBearing state ({err!r})"
         if problem is not None:
