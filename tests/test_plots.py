@@ -1,5 +1,6 @@
 """The run plots read as the issue asks: one panel per actual ball, the steady revolution on its own scale
 beside a start-up panel, titles with speed, ball count, damping and clearance."""
+import pytest
 import numpy as np
 
 from mechanism.cosim.record import RunResult
@@ -65,3 +66,30 @@ def test_envelope_keeps_every_peak_in_order_with_few_points():
             for c in curves:
                 assert c[k].max() == c.max() and c[k].min() == c.min()
     assert len(plots.envelope(np.arange(10.0))) == 10
+
+
+def test_a_figure_is_written_whole_or_not_at_all(tmp_path):
+    """PNGs are written to a temporary name and renamed (issue 14): a failing savefig leaves the old file as it
+    was and no temporary behind; a good one replaces it."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mechanism.output.atomic import save_figure
+    path = tmp_path / "f.png"
+    path.write_bytes(b"old")
+    fig = plt.figure()
+
+    def broken(target, **kwargs):
+        open(target, "wb").write(b"\x89PNG half")
+        raise OSError(28, "No space left on device")
+
+    good = fig.savefig
+    fig.savefig = broken
+    with pytest.raises(OSError):
+        save_figure(fig, path, dpi=50)
+    assert path.read_bytes() == b"old" and sorted(p.name for p in tmp_path.iterdir()) == ["f.png"]
+    fig.savefig = good
+    save_figure(fig, path, dpi=50)
+    plt.close(fig)
+    assert path.read_bytes()[:4] == b"\x89PNG" and sorted(p.name for p in tmp_path.iterdir()) == ["f.png"]

@@ -11,6 +11,7 @@ import numpy as np  # noqa: E402
 
 from fmu_bearing.parameters import BearingParameters  # noqa: E402
 from mechanism.cosim.record import RunResult  # noqa: E402
+from mechanism.output.atomic import save_figure  # noqa: E402
 
 
 def crank_pi(r: RunResult) -> np.ndarray:
@@ -68,7 +69,7 @@ def _margins(fig, top: float, left: float = 0.85, right: float = 0.2, bottom: fl
 
 def _save(fig, path: Path) -> Path:
     # zlib level 1: a few percent larger files, several times faster to encode than the default 6
-    fig.savefig(path, dpi=120, pil_kwargs={"compress_level": 1})
+    save_figure(fig, path, dpi=120, pil_kwargs={"compress_level": 1})
     plt.close(fig)
     return path
 

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..cosim.record import RunResult, energy_summary, unit_of
+from .atomic import atomic_open
 from .life import run_life
 
 
@@ -89,22 +90,6 @@ def output_lock(out: Path):
         yield out
     finally:
         os.close(fd)
-
-
-@contextlib.contextmanager
-def atomic_open(path: Path, mode: str = "w", **kwargs):
-    """``open(path, mode)`` on a temporary name beside ``path``, renamed to ``path`` when the block ends
-    without an exception (removed otherwise): ``path`` is either its old content or complete."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, mode, **kwargs) as f:
-            yield f
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
 
 
 #: rows formatted and written at a time by ``write_csv``

@@ -5,6 +5,7 @@ import json
 import math
 from pathlib import Path
 
+from mechanism.output.atomic import save_figure
 from mechanism.studies.advise.runs import Advice
 from mechanism.studies.advise.search import MERITS
 from mechanism.studies.stepsize.runs import write_csv
@@ -185,6 +186,6 @@ def plot(advice: Advice, path: Path) -> Path:
     fig.suptitle(f"Step-size advice: {operating_point(advice)}, tolerance {100 * advice.config.tolerance:g} %",
                  fontsize=11)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path

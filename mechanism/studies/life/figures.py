@@ -4,6 +4,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from mechanism.output.atomic import save_figure
+
 
 def plot(rows: list[dict], x: str, path: Path, title: str) -> None:
     """Rating life [h] (left) and the equivalent loads [N] (right) against ``x`` ("radial_clearance" or "rpm")."""
@@ -32,5 +34,5 @@ def plot(rows: list[dict], x: str, path: Path, title: str) -> None:
     failed = len(rows) - len(ok)
     fig.suptitle(title + (f" ({failed} point(s) failed, not shown)" if failed else ""))
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)

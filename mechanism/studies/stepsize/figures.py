@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 import numpy as np
+from mechanism.output.atomic import save_figure
 from mechanism.studies.stepsize.cases import (ADAPTIVE, DIVERGENT, FAILED, NONFINITE, ONE_PERCENT, ORDER_METRIC, PEAK_METRIC, STABLE)
 from mechanism.studies.stepsize.tables import (_axis)
 
@@ -58,7 +59,7 @@ def plot_study(rows: list[dict], summary: dict, out: Path) -> list[Path]:
                      fontsize=11)
         fig.tight_layout()
         p = out / f"stepsize_error_vs_step_{g}.png"
-        fig.savefig(p, dpi=110)
+        save_figure(fig, p, dpi=110)
         plt.close(fig)
         paths.append(p)
         fig, ax = plt.subplots(figsize=(7.5, 5.2))
@@ -76,7 +77,7 @@ def plot_study(rows: list[dict], summary: dict, out: Path) -> list[Path]:
             ax.legend(fontsize=8)
         fig.tight_layout()
         p = out / f"stepsize_error_vs_walltime_{g}.png"
-        fig.savefig(p, dpi=110)
+        save_figure(fig, p, dpi=110)
         plt.close(fig)
         paths.append(p)
     return paths

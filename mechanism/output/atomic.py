@@ -1,0 +1,38 @@
+"""Writing a file so that it is either its old content or complete (issue 14): a temporary name beside the
+target, renamed onto it when the write has finished, removed when it failed."""
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+
+
+@contextlib.contextmanager
+def atomic_open(path: Path, mode: str = "w", **kwargs):
+    """``open(path, mode)`` on a temporary name beside ``path``, renamed to ``path`` when the block ends
+    without an exception (removed otherwise): ``path`` is either its old content or complete."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, mode, **kwargs) as f:
+            yield f
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def save_figure(fig, path: Path, **kwargs) -> Path:
+    """``fig.savefig(path, **kwargs)`` on a temporary name beside ``path`` (same extension, so matplotlib
+    picks the format), renamed to ``path`` when complete: a PNG is either its old content or whole."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    try:
+        fig.savefig(tmp, **kwargs)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+    return path
