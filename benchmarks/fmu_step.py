@@ -249,37 +249,24 @@ def main(argv=None) -> int:
             base_fmu.enterInitializationMode()
             base_fmu.exitInitializationMode()
 
-        def fmpy_prebuilt_baseline(n):
-            b_set, b_step, b_get, b_comp = (base_fmu.fmi2SetReal, base_fmu.fmi2DoStep, base_fmu.fmi2GetReal,
-                                            base_fmu.component)
-            for i in range(n):
-                val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
-                b_set(b_comp, vr_in, 6, val_in)
-                b_step(b_comp, i * h, h, 1)
-                b_get(b_comp, vr_out, 2, val_out)
-                val_out[0], val_out[1]
+        def prebuilt_loop(slave):
+            """n set(6)/doStep/get(2) cycles on ``slave``'s fmi2* functions with prebuilt ctypes arrays."""
+            def loop(n):
+                f_set, f_step, f_get, f_comp = slave.fmi2SetReal, slave.fmi2DoStep, slave.fmi2GetReal, slave.component
+                for i in range(n):
+                    val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
+                    f_set(f_comp, vr_in, 6, val_in)
+                    f_step(f_comp, i * h, h, 1)
+                    f_get(f_comp, vr_out, 2, val_out)
+                    val_out[0], val_out[1]
+            return loop
 
-        def fmpy_prebuilt_plain(n):
-            p_set, p_step, p_get, p_comp = (plain_fmu.fmi2SetReal, plain_fmu.fmi2DoStep, plain_fmu.fmi2GetReal,
-                                            plain_fmu.component)
-            for i in range(n):
-                val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
-                p_set(p_comp, vr_in, 6, val_in)
-                p_step(p_comp, i * h, h, 1)
-                p_get(p_comp, vr_out, 2, val_out)
-                val_out[0], val_out[1]
+        fmpy_prebuilt_baseline = prebuilt_loop(base_fmu) if base_fmu is not None else None
+        fmpy_prebuilt_plain = prebuilt_loop(plain_fmu) if plain_fmu is not None else None
 
         trivial = trivial_fmu(Path(tmp))
 
-        def trivial_prebuilt(n):
-            t_set, t_step, t_get = trivial.fmi2SetReal, trivial.fmi2DoStep, trivial.fmi2GetReal
-            t_comp = trivial.component
-            for i in range(n):
-                val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
-                t_set(t_comp, vr_in, 6, val_in)
-                t_step(t_comp, i * h, h, 1)
-                t_get(t_comp, vr_out, 2, val_out)
-                val_out[0], val_out[1]
+        trivial_prebuilt = prebuilt_loop(trivial) if trivial is not None else None
 
         def fmpy_convenience(n):
             for i in range(n):
@@ -287,13 +274,7 @@ def main(argv=None) -> int:
                 fmu.doStep(i * h, h)
                 fmu.getReal(out_vrs)
 
-        def fmpy_prebuilt(n):
-            for i in range(n):
-                val_in[0], val_in[1], val_in[2], val_in[3], val_in[4], val_in[5] = S[i % nS]
-                set_real(comp, vr_in, 6, val_in)
-                do_step(comp, i * h, h, 1)
-                get_real(comp, vr_out, 2, val_out)
-                val_out[0], val_out[1]
+        fmpy_prebuilt = prebuilt_loop(fmu)
 
         def raw_ctypes(n):
             for i in range(n):
