@@ -214,10 +214,24 @@ if _cached:
             _sys.modules.setdefault(_name, _module)
     del _name, _module
 del _cached   # a module global on the import: would keep the cached modules (and the old shim) alive
-from {real} import {cls}
 '''
-SHIM = _SHIM_HEAD + _SHIM_BODY
-SHIM3 = _SHIM3_HEAD + _SHIM_BODY.replace("fmi2FreeInstance", "fmi3FreeInstance")
+#: pythonfmu3 0.3.4 crashes the host when the slave module fails to import (it goes on with a NULL module):
+#: a failed import gives a stand-in class instead, whose instantiation fails with a message (fmi3Fatal, NULL)
+_SHIM3_IMPORT = '''try:
+    from {real} import {cls}
+except Exception as _err:   # noqa: BLE001 - reported at instantiation
+    class _Unavailable:
+        """Stands in for the slave class when the FMU's modules cannot be imported."""
+
+        def __init__(self, _error=_err, **kwargs):
+            raise ImportError(f"{cls} cannot import its physics from the FMU's resources: {{_error!r}} "
+                              f"(Python {{_sys.version.split()[0]}} at {{_sys.executable}})")
+
+    {cls} = _Unavailable
+    del _err
+'''
+SHIM = _SHIM_HEAD + _SHIM_BODY + "from {real} import {cls}\n"
+SHIM3 = _SHIM3_HEAD + _SHIM_BODY.replace("fmi2FreeInstance", "fmi3FreeInstance") + _SHIM3_IMPORT
 
 #: pythonfmu's (and the shim's) pattern of the slave class statement
 _SLAVE_CLASS = re.compile(r"^class (\w+)\(\s*Fmi2Slave\s*[,)]", re.M)
