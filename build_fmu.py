@@ -201,7 +201,8 @@ import sys as _sys
 
 '''
 #: what both shims do: the released modules back into sys.modules, then import the class
-_SHIM_BODY = '''# The modules the last fmi2FreeInstance of this build removed (fmu_bearing.slaves.module_cache): back into
+_SHIM_BODY = '''\
+# The modules the last fmi2FreeInstance of this build removed (fmu_bearing.slaves.module_cache): back into
 # sys.modules, their packages pointed at this extraction, instead of a new import of every module.
 _cached = getattr(_sys, {cache!r}, {{}}).pop({names!r}, None)
 if _cached:
