@@ -131,7 +131,7 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
                                            documentation_folder=doc_dir, **spec.options)
             finally:
                 sys.path[:] = saved_path  # pythonfmu leaves the script's folder on sys.path
-            seal(fmu, max_balls, shim=spec.fmi == 2)
+            seal(fmu, max_balls, shim=True)
             build_loader(fmu)  # native hosts: the loader becomes the FMU's binary (fmu_bearing/native)
             model_name = _model_name(fmu)
             if model_name != spec.name:
@@ -166,7 +166,7 @@ def _unsealed_imports(source: str, renames: dict[str, str]) -> list[str]:
 
 
 #: the slave module pythonfmu's fmi2Instantiate executes (``seal``, ``shim=True``); {names} is filled in
-SHIM = '''"""{model}'s slave module for pythonfmu 0.7: a shim written by build_fmu.py (issue 14).
+_SHIM_HEAD = '''"""{model}'s slave module for pythonfmu 0.7: a shim written by build_fmu.py (issue 14).
 
 The slave class lives in {real}. pythonfmu's fmi2Instantiate imports this module and then executes its
 source once more to find the slave class; executing the full slave module there made new classes at every
@@ -183,6 +183,25 @@ if locals() is not globals():
     # borrowed it (PyModule_GetDict); one more reference balances that, or the dict would be freed in use.
     import ctypes as _ctypes
     _ctypes.pythonapi.Py_IncRef(_ctypes.py_object(globals()))
+'''
+#: the same for pythonfmu3 0.3.4's fmi3InstantiateCoSimulation, which only imports the slave module and takes
+#: the class named by the first class statement deriving from Fmi3Slave in the module's file
+_SHIM3_HEAD = '''"""{model}'s slave module for pythonfmu3: a shim written by build_fmu.py (issue 14).
+
+The slave class lives in {real}. pythonfmu3's fmi3InstantiateCoSimulation imports this module and takes the
+class named on the first line of this file that looks like a class statement deriving from Fmi3Slave. The
+last fmi3FreeInstance of the FMU removes its modules from sys.modules (sealing), so with the full slave module
+here every instantiation after a last free imported all of the FMU's modules afresh, and each import left
+memory behind (about 200 kB). Here only the class is imported, from the modules the last free kept aside:
+the same class every time. The line pythonfmu3 finds:
+
+class {cls}(Fmi3Slave):
+"""
+import sys as _sys
+
+'''
+#: what both shims do: the released modules back into sys.modules, then import the class
+_SHIM_BODY = '''\
 # The modules the last fmi2FreeInstance of this build removed (fmu_bearing.slaves.module_cache): back into
 # sys.modules, their packages pointed at this extraction, instead of a new import of every module.
 _cached = getattr(_sys, {cache!r}, {{}}).pop({names!r}, None)
@@ -196,11 +215,29 @@ if _cached:
             _sys.modules.setdefault(_name, _module)
     del _name, _module
 del _cached   # a module global on the import: would keep the cached modules (and the old shim) alive
-from {real} import {cls}
 '''
+#: pythonfmu3 0.3.4 crashes the host when the slave module fails to import (it goes on with a NULL module):
+#: a failed import gives a stand-in class instead, whose instantiation fails with a message (fmi3Fatal, NULL)
+_SHIM3_IMPORT = '''try:
+    from {real} import {cls}
+except Exception as _err:   # noqa: BLE001 - reported at instantiation
+    class _Unavailable:
+        """Stands in for the slave class when the FMU's modules cannot be imported."""
+
+        def __init__(self, _error=_err, **kwargs):
+            raise ImportError(f"{cls} cannot import its physics from the FMU's resources: {{_error!r}} "
+                              f"(Python {{_sys.version.split()[0]}} at {{_sys.executable}})")
+
+    {cls} = _Unavailable
+    del _err
+'''
+SHIM = _SHIM_HEAD + _SHIM_BODY + "from {real} import {cls}\n"
+SHIM3 = _SHIM3_HEAD + _SHIM_BODY.replace("fmi2FreeInstance", "fmi3FreeInstance") + _SHIM3_IMPORT
 
 #: pythonfmu's (and the shim's) pattern of the slave class statement
 _SLAVE_CLASS = re.compile(r"^class (\w+)\(\s*Fmi2Slave\s*[,)]", re.M)
+#: pythonfmu3 0.3.4's pattern (its binary's): the first class statement with Fmi3Slave among its bases
+_SLAVE_CLASS3 = re.compile(r"^class (\w+)\(([^)]*\bFmi3Slave(?:Base)?\b[^)]*)", re.M)
 
 
 def seal(fmu: Path, max_balls: int, shim: bool = False) -> dict[str, str]:
@@ -212,9 +249,10 @@ def seal(fmu: Path, max_balls: int, shim: bool = False) -> dict[str, str]:
     options with the list of private module names. The hash (12 hex digits of SHA-256) is taken over the
     packed files, so the same sources give the same names. Returns {old name: private name}.
 
-    ``shim`` (pythonfmu 0.7 builds): when the slave script is also packed inside one of the packages, the
-    slave module becomes ``SHIM``, which imports the slave class from its private package module, so that
-    re-instantiating the FMU does not re-create the class (issue 14).
+    ``shim``: when the slave script is also packed inside one of the packages, the slave module becomes
+    ``SHIM`` (pythonfmu 0.7, an ``Fmi2Slave`` class) or ``SHIM3`` (pythonfmu3, an ``Fmi3Slave`` class), which
+    imports the slave class from its private package module, so that re-instantiating the FMU does not
+    re-create the class nor, after a last free, import the FMU's modules again (issue 14).
     """
     with zipfile.ZipFile(fmu) as z:
         entries = [(info, z.read(info)) for info in z.infolist()]
@@ -234,12 +272,14 @@ def seal(fmu: Path, max_balls: int, shim: bool = False) -> dict[str, str]:
         source = files[f"resources/{slave}.py"]
         inside = sorted(n for n in files if n.startswith("resources/") and n.count("/") >= 2
                         and n.endswith(f"/{slave}.py") and files[n] == source)
-        found = _SLAVE_CLASS.search(source.decode("utf-8"))
+        template, found = SHIM, _SLAVE_CLASS.search(source.decode("utf-8"))
+        if found is None:
+            template, found = SHIM3, _SLAVE_CLASS3.search(source.decode("utf-8"))
         if inside and found:
             parts = inside[0][len("resources/"):-len(".py")].split("/")
             real = ".".join([renames[parts[0]], *parts[1:]])
             model = ElementTree.fromstring(files["modelDescription.xml"]).get("modelName")
-            shim_text = SHIM.format(model=model, real=real, cls=found.group(1), cache=MODULE_CACHE,
+            shim_text = template.format(model=model, real=real, cls=found.group(1), cache=MODULE_CACHE,
                                     names=tuple(options["private_modules"]))
     tmp = fmu.with_name(fmu.name + ".sealing")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as out:

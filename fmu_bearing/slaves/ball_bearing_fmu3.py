@@ -28,9 +28,12 @@ only non-OK status pythonfmu3 can give that call) after a logger message naming 
 Only the standard library and pythonfmu3's own pure-Python modules are imported at run time (pythonfmu3
 imports numpy for array variables unless they bring their own getter and setter, which these do).
 
-This file is the FMU's slave module: pythonfmu3's binary imports it as a top-level module and finds the
-class by a regular expression on its source lines (the first class statement deriving from Fmi3Slave), so
-no other line may look like one; it uses absolute imports only and no ``from __future__`` import.
+pythonfmu3's binary imports the FMU's slave module as a top-level module and finds the class by a regular
+expression on its source lines (the first class statement deriving from Fmi3Slave), so no other line may look
+like one; this file uses absolute imports only and no ``from __future__`` import. In the built FMU the slave
+module is a shim (build_fmu.py, ``SHIM3``) that imports this class from the FMU's private copy of this
+package, and after a last fmi3FreeInstance puts the released modules back instead of importing them again
+(issue 14; docs/robustness.md, Memory); a package that cannot be imported fails the instantiation there too.
 """
 import ctypes
 import math
