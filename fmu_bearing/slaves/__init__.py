@@ -320,8 +320,8 @@ def release_on_free(slave) -> None:
             for name, module in modules.items():
                 sys.modules.setdefault(name, module)
             sys.path.insert(0, resources)
-        # else a fresh import of the FMU's modules (a binary without the shim, e.g. pythonfmu3's): the cached
-        # copy is not this one and is dropped
+        # else a fresh import of the FMU's modules (an FMU built without the shim): the cached copy is not
+        # this one and is dropped
     _LIVE[names] = _LIVE.get(names, 0) + 1
     release = weakref.finalize(slave, _release, names, resources)
     release.atexit = False
