@@ -153,7 +153,7 @@ def test_a_failed_write_keeps_the_old_file_and_leaves_no_partial_file(tmp_path, 
     write_outputs(result, tmp_path, plots=False)
     old = (tmp_path / "timeseries.csv").read_bytes()
 
-    import mechanism.output.results as results
+    import mechanism.output.atomic as atomic   # where every output file is opened (atomic_open)
 
     class FullDisk:
         """A file whose write fails once the row for time 3 comes (the disk fills mid-file)."""
@@ -171,7 +171,7 @@ def test_a_failed_write_keeps_the_old_file_and_leaves_no_partial_file(tmp_path, 
 
         def __exit__(self, *exc):
             return self.f.__exit__(*exc)
-    monkeypatch.setattr(results, "open", lambda *a, **k: FullDisk(open(*a, **k)), raising=False)
+    monkeypatch.setattr(atomic, "open", lambda *a, **k: FullDisk(open(*a, **k)), raising=False)
     with pytest.raises(OSError, match="No space"):
         write_outputs(result, tmp_path, plots=False)
     assert (tmp_path / "timeseries.csv").read_bytes() == old
