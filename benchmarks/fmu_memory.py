@@ -52,15 +52,8 @@ def rss_mb() -> float:
 
 def instantiate_free(fmu: Path, cycles: int, warmup: int = 20) -> tuple[float, float]:
     """(RSS before, RSS after) ``cycles`` instantiate/initialise/step/free cycles on one loaded binary."""
-    from fmpy import read_model_description
     from fmpy.fmi2 import FMU2Slave
-
-    from mechanism.cosim.endpoints import shared_extraction
-    md = read_model_description(str(fmu))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    inputs = [vr[n] for n in ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")]
-    slave = FMU2Slave(guid=md.guid, unzipDirectory=shared_extraction(fmu, md.guid),
-                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="memory")
+    slave, vr, inputs = _loaded(fmu, FMU2Slave)
 
     def cycle():
         slave.instantiate()
@@ -74,27 +67,27 @@ def instantiate_free(fmu: Path, cycles: int, warmup: int = 20) -> tuple[float, f
         slave.terminate()
         slave.fmi2FreeInstance(slave.component)   # fmpy's freeInstance() would also unload the library
 
-    for _ in range(warmup):
-        cycle()
-    gc.collect()
-    before = rss_mb()
-    for _ in range(cycles):
-        cycle()
-    gc.collect()
-    return before, rss_mb()
+    return _measure(cycle, cycles, warmup)
 
 
-def instantiate_free3(fmu: Path, cycles: int, warmup: int = 20) -> tuple[float, float]:
-    """``instantiate_free`` for an FMI 3.0 FMU (BallBearing3): fmpy's ``FMU3Slave``, ``fmi3FreeInstance``."""
+def _loaded(fmu: Path, slave_class):
+    """(an fmpy ``slave_class`` instance on the FMU's shared extraction, {name: value reference}, the input
+    value references): one loaded binary for the instantiate/free cycles."""
     from fmpy import read_model_description
-    from fmpy.fmi3 import FMU3Slave
 
     from mechanism.cosim.endpoints import shared_extraction
     md = read_model_description(str(fmu))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     inputs = [vr[n] for n in ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")]
-    slave = FMU3Slave(guid=md.guid, unzipDirectory=shared_extraction(fmu, md.guid),
-                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="memory")
+    slave = slave_class(guid=md.guid, unzipDirectory=shared_extraction(fmu, md.guid),
+                        modelIdentifier=md.coSimulation.modelIdentifier, instanceName="memory")
+    return slave, vr, inputs
+
+
+def instantiate_free3(fmu: Path, cycles: int, warmup: int = 20) -> tuple[float, float]:
+    """``instantiate_free`` for an FMI 3.0 FMU (BallBearing3): fmpy's ``FMU3Slave``, ``fmi3FreeInstance``."""
+    from fmpy.fmi3 import FMU3Slave
+    slave, vr, inputs = _loaded(fmu, FMU3Slave)
 
     def cycle():
         slave.instantiate()
