@@ -131,7 +131,7 @@ def build(out_dir: str | Path = "dist", max_balls: int = DEFAULT_MAX_BALLS,
                                            documentation_folder=doc_dir, **spec.options)
             finally:
                 sys.path[:] = saved_path  # pythonfmu leaves the script's folder on sys.path
-            seal(fmu, max_balls, shim=True)
+            seal(fmu, max_balls)
             build_loader(fmu)  # native hosts: the loader becomes the FMU's binary (fmu_bearing/native)
             model_name = _model_name(fmu)
             if model_name != spec.name:
@@ -165,7 +165,7 @@ def _unsealed_imports(source: str, renames: dict[str, str]) -> list[str]:
     return found
 
 
-#: the slave module pythonfmu's fmi2Instantiate executes (``seal``, ``shim=True``); {names} is filled in
+#: the slave module pythonfmu's fmi2Instantiate executes (``seal``); {names} is filled in
 _SHIM_HEAD = '''"""{model}'s slave module for pythonfmu 0.7: a shim written by build_fmu.py (issue 14).
 
 The slave class lives in {real}. pythonfmu's fmi2Instantiate imports this module and then executes its
@@ -240,7 +240,7 @@ _SLAVE_CLASS = re.compile(r"^class (\w+)\(\s*Fmi2Slave\s*[,)]", re.M)
 _SLAVE_CLASS3 = re.compile(r"^class (\w+)\(([^)]*\bFmi3Slave(?:Base)?\b[^)]*)", re.M)
 
 
-def seal(fmu: Path, max_balls: int, shim: bool = False) -> dict[str, str]:
+def seal(fmu: Path, max_balls: int) -> dict[str, str]:
     """Rename the packages and the slave module packed in ``fmu`` to private names unique to the build.
 
     Rewrites the archive in place: ``resources/<package>/`` -> ``resources/_<package>_<hash>/`` for every
@@ -249,7 +249,7 @@ def seal(fmu: Path, max_balls: int, shim: bool = False) -> dict[str, str]:
     options with the list of private module names. The hash (12 hex digits of SHA-256) is taken over the
     packed files, so the same sources give the same names. Returns {old name: private name}.
 
-    ``shim``: when the slave script is also packed inside one of the packages, the slave module becomes
+    When the slave script is also packed inside one of the packages, the slave module becomes
     ``SHIM`` (pythonfmu 0.7, an ``Fmi2Slave`` class) or ``SHIM3`` (pythonfmu3, an ``Fmi3Slave`` class), which
     imports the slave class from its private package module, so that re-instantiating the FMU does not
     re-create the class nor, after a last free, import the FMU's modules again (issue 14).
@@ -268,18 +268,17 @@ def seal(fmu: Path, max_balls: int, shim: bool = False) -> dict[str, str]:
     options = {**json.loads(files[f"resources/{BUILD_OPTIONS_FILE}"]), "max_balls": int(max_balls),
                "private_modules": sorted(renames.values())}
     shim_text = None
-    if shim:
-        source = files[f"resources/{slave}.py"]
-        inside = sorted(n for n in files if n.startswith("resources/") and n.count("/") >= 2
-                        and n.endswith(f"/{slave}.py") and files[n] == source)
-        template, found = SHIM, _SLAVE_CLASS.search(source.decode("utf-8"))
-        if found is None:
-            template, found = SHIM3, _SLAVE_CLASS3.search(source.decode("utf-8"))
-        if inside and found:
-            parts = inside[0][len("resources/"):-len(".py")].split("/")
-            real = ".".join([renames[parts[0]], *parts[1:]])
-            model = ElementTree.fromstring(files["modelDescription.xml"]).get("modelName")
-            shim_text = template.format(model=model, real=real, cls=found.group(1), cache=MODULE_CACHE,
+    source = files[f"resources/{slave}.py"]
+    inside = sorted(n for n in files if n.startswith("resources/") and n.count("/") >= 2
+                    and n.endswith(f"/{slave}.py") and files[n] == source)
+    template, found = SHIM, _SLAVE_CLASS.search(source.decode("utf-8"))
+    if found is None:
+        template, found = SHIM3, _SLAVE_CLASS3.search(source.decode("utf-8"))
+    if inside and found:
+        parts = inside[0][len("resources/"):-len(".py")].split("/")
+        real = ".".join([renames[parts[0]], *parts[1:]])
+        model = ElementTree.fromstring(files["modelDescription.xml"]).get("modelName")
+        shim_text = template.format(model=model, real=real, cls=found.group(1), cache=MODULE_CACHE,
                                     names=tuple(options["private_modules"]))
     tmp = fmu.with_name(fmu.name + ".sealing")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as out:

@@ -46,6 +46,8 @@ from fmu_bearing.parameters import BearingParameters  # noqa: E402
 INPUTS = ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")
 TARGET_IN_PROCESS_US, TARGET_EXCHANGE_US = 10.0, 25.0
 TARGET_NATIVE_US, TARGET_FMPY_US = 10.0, 7.5
+RESTORE_KEY = "fmpy setFMUstate of the instance's own state (rollback)"
+BASELINE_RESTORE_KEY = "fmpy setFMUstate of the instance's own state, --baseline FMU"
 #: the issue's reference: a trivial compiled FMU costs about 2 us per cycle through fmpy (prebuilt arrays)
 TRIVIAL_REFERENCE_US = 2.0
 TRIVIAL_KEY = "exchange, fmpy fmi2* prebuilt, trivial compiled FMU (no model)"
@@ -318,7 +320,21 @@ def main(argv=None) -> int:
                     ev(ex, ey, vx, vy, 0.1 * i, wi, wo, loads)
             return evaluate
 
+        def restore_loop(slave):
+            """n fmi2SetFMUstate of a state the instance saved itself after initialisation: the masters'
+            rollback (the iterated and adaptive schemes), once per step."""
+            state = slave.getFMUstate()
+
+            def loop(n):
+                set_state = slave.setFMUstate
+                for _ in range(n):
+                    set_state(state)
+            return loop
+
         c, r = args.calls, args.repeat
+        restore = {RESTORE_KEY: restore_loop(fmu)}
+        if base_fmu is not None:
+            restore[BASELINE_RESTORE_KEY] = restore_loop(base_fmu)
         plain = {"exchange, fmpy fmi2* prebuilt, pythonfmu binary alone (no loader)": fmpy_prebuilt_plain} \
             if plain_fmu is not None else {}
         trivial_case = {TRIVIAL_KEY: trivial_prebuilt} if trivial is not None else {}
@@ -336,6 +352,7 @@ def main(argv=None) -> int:
             "  slave Python code alone (set_real, do_step, get_real)": slave_direct,
             "in-process evaluate, 8 balls": in_process(8),
             "in-process evaluate, 20 balls": in_process(20),
+            **restore,       # last: restoring a state sets the instance back
         }, c, r)
         fmu.terminate()
         fmu.freeInstance()
@@ -371,6 +388,9 @@ def main(argv=None) -> int:
         print(f"  ratio this FMU / --baseline FMU: fmpy (prebuilt arrays) {exchange / base_fmpy:.2f}"
               + (f", native host {results['exchange, native C host through the loader'] / base_native:.2f}"
                  if base_native is not None else ""))
+    base_restore = results.get(BASELINE_RESTORE_KEY)
+    if base_restore is not None:
+        print(f"  ratio this FMU / --baseline FMU: fmi2SetFMUstate of its own state {results[RESTORE_KEY] / base_restore:.2f}")
     native = results.get("exchange, native C host through the loader")
     if native is not None:
         before = results.get("exchange, native C host, pythonfmu binary + LD_PRELOAD")

@@ -209,7 +209,7 @@ class LifeAccumulator:
         p_e = P_STATIONARY
         used = loads[:z]
         if len(used) < z:
-            loads[z - 1]   # IndexError, as indexing each of the first n_balls would raise
+            raise IndexError(f"{len(used)} ball loads for n_balls = {z}")
         for q in used:
             if q > 0.0:
                 s3 += q * q * q

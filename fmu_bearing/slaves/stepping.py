@@ -61,8 +61,8 @@ class BearingStepping:
             self._pending_error = None
             return reason
         w_i, w_o = self.omega_inner, self.omega_outer
-        try:   # bearing.check_inputs, one call less
-            physics.check_joint_inputs(bearing.eccentricity_limit, self.e_x, self.e_y, self.v_x, self.v_y, w_i, w_o)
+        try:
+            bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, w_i, w_o)
         except physics.BearingInputError as err:
             return str(err)
         if not step_size >= 0.0:

@@ -8,31 +8,31 @@ from pathlib import Path
 
 
 @contextlib.contextmanager
-def atomic_open(path: Path, mode: str = "w", **kwargs):
-    """``open(path, mode)`` on a temporary name beside ``path``, renamed to ``path`` when the block ends
-    without an exception (removed otherwise): ``path`` is either its old content or complete."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+def _replacing(path: Path, tmp: Path):
+    """Yield ``tmp``; rename it onto ``path`` when the block ends without an exception, else remove it."""
     try:
-        with open(tmp, mode, **kwargs) as f:
-            yield f
+        yield tmp
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
+
+
+@contextlib.contextmanager
+def atomic_open(path: Path, mode: str = "w", **kwargs):
+    """``open(path, mode)`` on a temporary name beside ``path``, renamed to ``path`` when the block ends
+    without an exception (removed otherwise): ``path`` is either its old content or complete."""
+    path = Path(path)
+    with _replacing(path, path.with_name(f".{path.name}.{os.getpid()}.tmp")) as tmp:
+        with open(tmp, mode, **kwargs) as f:
+            yield f
 
 
 def save_figure(fig, path: Path, **kwargs) -> Path:
     """``fig.savefig(path, **kwargs)`` on a temporary name beside ``path`` (same extension, so matplotlib
     picks the format), renamed to ``path`` when complete: a PNG is either its old content or whole."""
     path = Path(path)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
-    try:
+    with _replacing(path, path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")) as tmp:
         fig.savefig(tmp, **kwargs)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
     return path
