@@ -75,6 +75,7 @@ def compile_loader(platform: str, output: Path, table: list[tuple[int, int, int]
         config.write_text(f"#define DD_COUNT {len(table)}\n"
                           + (f"#define DD_TABLE {{{rows}}}\n" if table else ""), encoding="utf-8")
         command = [*zig_cc(), "-target", target, "-shared", "-O2", "-std=c99", "-Wall", "-Werror",
+                   "-ffp-contract=off", "-fno-fast-math",   # the C step's doubles = Python's (loader.c, "C step")
                    f'-DLOADER_CONFIG="{config.as_posix()}"', "-o", str(output), str(SOURCE)]
         if platform == "linux64":
             command[4:4] = ["-fPIC", "-fvisibility=hidden", "-s"]

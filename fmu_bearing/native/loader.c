@@ -55,6 +55,7 @@
 #define _GNU_SOURCE
 #endif
 #include <stdarg.h>
+#include <math.h>
 #include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -122,8 +123,6 @@ typedef struct {
       (fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real t0, fmi2Boolean stopDef, fmi2Real t1),   \
       (c, tolDef, tol, t0, stopDef, t1))                                                                    \
     X(fmi2Status, EnterInitializationMode, (fmi2Component c), (c))                                          \
-    X(fmi2Status, GetInteger, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]),  \
-      (c, vr, n, v))                                                                                        \
     X(fmi2Status, GetBoolean, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]),  \
       (c, vr, n, v))                                                                                        \
     X(fmi2Status, GetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]),    \
@@ -160,6 +159,8 @@ typedef struct {
     X(fmi2Status, Terminate, (fmi2Component c), (c))                                                        \
     X(fmi2Status, Reset, (fmi2Component c), (c))                                                            \
     X(fmi2Status, GetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]),        \
+      (c, vr, n, v))                                                                                        \
+    X(fmi2Status, GetInteger, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]),  \
       (c, vr, n, v))                                                                                        \
     X(fmi2Status, SetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]),  \
       (c, vr, n, v))                                                                                        \
@@ -218,6 +219,21 @@ static int fast_api;  /* 1: every function the fast path needs (but Object_Vecto
 #define FAST_MAX_IN 16
 #define FAST_MAX_OUT 32
 
+/* ---- the C step's data (see "C step" below): the slave's constants and state, as doubles ------------ */
+#define K_OUTPUTS 10   /* F_x F_y k_xx k_xy k_yy c_xx c_xy c_yy loaded_balls max_ball_load (BearingForce) */
+#define K_LIFE 4       /* LifeAccumulator.state(): sum_cubed_inner sum_cubed_outer revolutions time */
+typedef struct {
+    int n_balls, capacity, life_on;
+    double K, half, C, w_inner, w_outer, limit;           /* BallBearing: stiffness ... eccentricity limit */
+    double p_e, cube_of_stationary, two_pi, load_angular_velocity;   /* life.py's constants, as Python has them */
+    fmi2ValueReference out_vr[K_OUTPUTS], cage_vr, load_vr0;          /* outputs, cage_angle, ball_load_1 */
+    double *balls;                      /* n_balls x (cos, sin, cos^2, cos sin, sin^2): BallBearing._balls */
+    /* state */
+    double cage_angle, out[K_OUTPUTS], life[K_LIFE];
+    double *loads;                      /* capacity ball loads (ball_load_1 ...) */
+    double *scratch;                    /* this step's loads until the step is accepted */
+} Kernel;
+
 /* ---- one instance: pythonfmu's component and the host's callbacks --------------------------------- */
 typedef struct {
     fmi2Component inner;                /* pythonfmu's component */
@@ -243,6 +259,13 @@ typedef struct {
     unsigned in_dirty;                  /* bit i: in_val[i] was set here and not yet passed to the slave */
     int out_valid;                      /* out_val mirrors the slave's outputs out_vr */
     fmi2Real in_val[FAST_MAX_IN], out_val[FAST_MAX_OUT];
+    /* the C step (see "C step" below) */
+    void *k_load, *k_store;             /* PyObject*: the slave's kernel_load() and kernel_store(values), or NULL */
+    int k_retry;                        /* load (again) before the next step: the slave may have changed */
+    int k_valid;                        /* the kernel holds the slave's state (spec and state loaded) */
+    int k_dirty;                        /* the kernel stepped since the last push: the slave is behind */
+    long long k_steps;                  /* steps done in C (tests: bearingLoaderKernelSteps) */
+    Kernel k;
 } Instance;
 
 static void drop_step(Instance *inst);
@@ -813,13 +836,313 @@ EXPORT int bearingLoaderFastPathOn(const void *c) {
 static void drop_step(Instance *inst) {
     inst->fast_on = inst->in_valid = inst->out_valid = 0;
     inst->in_dirty = 0;
-    if (inst->step != NULL) {
+    inst->k_valid = inst->k_dirty = inst->k_retry = 0;   /* the kernel's state dies with the slave */
+    if (inst->step != NULL || inst->k_load != NULL) {
         PyGILState_STATE g = py.GILState_Ensure();
-        py.DecRef(inst->step);
+        if (inst->step != NULL) py.DecRef(inst->step);
         if (inst->queue != NULL) py.DecRef(inst->queue);
+        if (inst->k_load != NULL) py.DecRef(inst->k_load);
+        if (inst->k_store != NULL) py.DecRef(inst->k_store);
         py.GILState_Release(g);
-        inst->step = inst->queue = NULL;
+        inst->step = inst->queue = inst->k_load = inst->k_store = NULL;
     }
+    free(inst->k.balls);
+    free(inst->k.loads);
+    free(inst->k.scratch);
+    inst->k.balls = inst->k.loads = inst->k.scratch = NULL;
+    inst->k.n_balls = inst->k.capacity = 0;
+}
+
+/* ---- C step ---------------------------------------------------------------------------------------
+ * The BallBearing slave's whole doStep in C, for the configurations it covers (damping_model 0 or 1; the
+ * oil-film model keeps the Python step). The slave registers two callables at instantiation
+ * (bearingLoaderRegisterKernel, from BallBearing.__init__ in fmu_bearing/slaves/ball_bearing_fmu.py):
+ *   kernel_load()         -> None (not this configuration, not initialised, terminated, an error pending:
+ *                            the Python step) or a flat tuple of numbers: the constants BallBearing
+ *                            precomputed (its doubles, not recomputed here), the life constants and the state
+ *                            (cage angle, outputs, life sums, ball loads); layout in _kernel_load;
+ *   kernel_store(values)  pushes the kernel's state back into the slave: inputs, cage angle, the 10
+ *                            BearingForce outputs, life sums, ball loads.
+ * Once loaded, fmi2DoStep runs kernel_step below: the operations of BallBearing.advance_cage,
+ * BallBearing.evaluate and LifeAccumulator.add (fmu_bearing/ball_bearing.py, fmu_bearing/life.py) in the
+ * same order, with the same libm functions CPython's math module and float ** call (cos, sin, sqrt, pow;
+ * built with -ffp-contract=off: no fused multiply-add), so every result is the same double as the Python
+ * step's. Anything unusual -- a non-finite input, |e| not clearly inside the eccentricity limit (Python's
+ * math.hypot is not libm's hypot), a step size not >= 0, a non-finite result or pow overflow -- is not
+ * decided here: the state is pushed and the Python step runs (its refusal, message and status exactly as
+ * without the kernel), and the kernel reloads before its next step. Before any call is forwarded to
+ * pythonfmu the kernel's state is pushed (before_forward); a forwarded call that may change the slave
+ * (set, set state, setup, terminate, reset ...) makes the kernel reload before its next step. fmi2GetReal of
+ * the outputs the step computes (F_x ... max_ball_load, cage_angle, ball_load_i) and fmi2GetInteger of
+ * loaded_balls are answered from the kernel. BEARING_FMU_C_STEP=0 in the environment at fmi2Instantiate
+ * turns the kernel off for that instance (the Python step, through the fast path). */
+
+/* For the FMU's Python side (GIL held, ctypes.PyDLL): register the kernel callables of the slave being
+   instantiated on this thread (after bearingLoaderRegisterStep). 1: registered; 0: not (no fast path, the
+   inputs are not the six joint inputs, or BEARING_FMU_C_STEP=0). */
+EXPORT int bearingLoaderRegisterKernel(void *load, void *store) {
+    Instance *inst = registering;
+    const char *env = getenv("BEARING_FMU_C_STEP");
+    if (inst == NULL || inst->step == NULL || load == NULL || store == NULL || load == py.None ||
+        store == py.None || inst->n_in != 6 || (env != NULL && strcmp(env, "0") == 0))
+        return 0;
+    py.IncRef(load);
+    py.IncRef(store);
+    if (inst->k_load != NULL) py.DecRef(inst->k_load);
+    if (inst->k_store != NULL) py.DecRef(inst->k_store);
+    inst->k_load = load;
+    inst->k_store = store;
+    inst->k_valid = inst->k_dirty = 0;
+    inst->k_retry = 1;
+    return 1;
+}
+
+/* For tests and benchmarks: the number of steps ``c`` (one of this loader's live instances) did in C. */
+EXPORT long long bearingLoaderKernelSteps(const void *c) {
+    long long n = -1;
+    LOCK();
+    for (int i = 0; i < MAX_LIVE; i++)
+        if (c != NULL && live[i] == (const Instance *)c) {
+            n = live[i]->k_steps;
+            break;
+        }
+    UNLOCK();
+    return n;
+}
+
+/* callable(arg) or callable() (arg NULL); a new reference or NULL (GIL held) */
+static void *call_python(void *callable, void *arg) {
+    void *result = NULL, *tuple = py.Tuple_New(arg != NULL ? 1 : 0);
+    if (tuple == NULL) return NULL;
+    if (arg != NULL) {
+        py.IncRef(arg);   /* PyTuple_SetItem steals one reference */
+        py.Tuple_SetItem(tuple, 0, arg);
+    }
+    result = py.Object_Call(callable, tuple, NULL);
+    py.DecRef(tuple);
+    return result;
+}
+
+#define K_HEADER 25     /* n_balls capacity life_on K half C w_inner w_outer limit p_e cube two_pi load_w
+                           out_vr[10] cage_vr load_vr0 */
+#define K_STATE (1 + K_OUTPUTS + K_LIFE)
+
+/* Load the slave's constants and state (kernel_load); 1: the kernel owns the step now, 0: Python step. */
+static int kernel_load(Instance *inst) {
+    Kernel *k = &inst->k;
+    int ok = 0, i;
+    PyGILState_STATE g = py.GILState_Ensure();
+    void *r = call_python(inst->k_load, NULL);
+    if (r != NULL && r != py.None) {
+        ptrdiff_t size = py.Tuple_Size(r);
+#define ITEM(j) py.Float_AsDouble(py.Tuple_GetItem(r, (j)))
+        double n = size >= K_HEADER ? ITEM(0) : 0.0, cap = size >= K_HEADER ? ITEM(1) : 0.0;
+        if (py.Err_Occurred() == NULL && n >= 1.0 && cap >= n && cap <= 1e6 && n == (int)n && cap == (int)cap &&
+            size == K_HEADER + K_STATE + (ptrdiff_t)cap + 5 * (ptrdiff_t)n) {
+            int nb = (int)n, nc = (int)cap;
+            double *balls = (double *)realloc(k->balls, (size_t)nb * 5 * sizeof(double));
+            if (balls != NULL) k->balls = balls;
+            double *loads = balls ? (double *)realloc(k->loads, (size_t)nc * sizeof(double)) : NULL;
+            if (loads != NULL) k->loads = loads;
+            double *scratch = loads ? (double *)realloc(k->scratch, (size_t)nc * sizeof(double)) : NULL;
+            if (scratch != NULL) k->scratch = scratch;
+            if (scratch != NULL) {
+                k->n_balls = nb;
+                k->capacity = nc;
+                k->life_on = ITEM(2) != 0.0;
+                k->K = ITEM(3);
+                k->half = ITEM(4);
+                k->C = ITEM(5);
+                k->w_inner = ITEM(6);
+                k->w_outer = ITEM(7);
+                k->limit = ITEM(8);
+                k->p_e = ITEM(9);
+                k->cube_of_stationary = ITEM(10);
+                k->two_pi = ITEM(11);
+                k->load_angular_velocity = ITEM(12);
+                for (i = 0; i < K_OUTPUTS; i++) k->out_vr[i] = (fmi2ValueReference)ITEM(13 + i);
+                k->cage_vr = (fmi2ValueReference)ITEM(13 + K_OUTPUTS);
+                k->load_vr0 = (fmi2ValueReference)ITEM(14 + K_OUTPUTS);
+                k->cage_angle = ITEM(K_HEADER);
+                for (i = 0; i < K_OUTPUTS; i++) k->out[i] = ITEM(K_HEADER + 1 + i);
+                for (i = 0; i < K_LIFE; i++) k->life[i] = ITEM(K_HEADER + 1 + K_OUTPUTS + i);
+                for (i = 0; i < nc; i++) k->loads[i] = ITEM(K_HEADER + K_STATE + i);
+                for (i = 0; i < 5 * nb; i++) k->balls[i] = ITEM(K_HEADER + K_STATE + nc + i);
+                ok = py.Err_Occurred() == NULL;
+            }
+        }
+#undef ITEM
+    }
+    if (py.Err_Occurred() != NULL) py.Err_Clear();
+    if (r != NULL) py.DecRef(r);
+    py.GILState_Release(g);
+    return ok;
+}
+
+/* Push the kernel's state into the slave (kernel_store) if it stepped since the last push. */
+static fmi2Status kernel_push(Instance *inst) {
+    Kernel *k = &inst->k;
+    if (!inst->k_dirty) return fmi2OK;
+    int n = 6 + K_STATE + k->capacity, i, j = 0, ok = 0;
+    PyGILState_STATE g = py.GILState_Ensure();
+    void *tuple = py.Tuple_New(n), *r = NULL;
+    if (tuple != NULL) {
+        ok = 1;
+#define PUT(x)                                                  \
+    do {                                                        \
+        void *item_ = py.Float_FromDouble(x);                   \
+        if (item_ == NULL) ok = 0; else py.Tuple_SetItem(tuple, j, item_); \
+        j++;                                                    \
+    } while (0)
+        for (i = 0; i < 6; i++) PUT(inst->in_val[i]);
+        PUT(k->cage_angle);
+        for (i = 0; i < K_OUTPUTS; i++) PUT(k->out[i]);
+        for (i = 0; i < K_LIFE; i++) PUT(k->life[i]);
+        for (i = 0; i < k->capacity; i++) PUT(k->loads[i]);
+#undef PUT
+        if (ok) r = call_python(inst->k_store, tuple);
+        py.DecRef(tuple);
+    }
+    ok = r != NULL && r != py.None;
+    if (r != NULL) py.DecRef(r);
+    if (py.Err_Occurred() != NULL) py.Err_Clear();
+    py.GILState_Release(g);
+    inst->k_dirty = 0;
+    if (!ok) {   /* only a failure of the Python machinery itself: the slave is behind, stop here */
+        inst->fast_on = inst->in_valid = inst->out_valid = inst->k_valid = 0;
+        host_log(inst->host_functions, inst->host_env, inst->name, fmi2Error, "logStatusError",
+                 "the loader could not pass the C step's state to the slave (Python error); the loader's fast "
+                 "path is off for this instance");
+        return fmi2Error;
+    }
+    inst->in_dirty = 0;    /* the slave holds the inputs */
+    return fmi2OK;
+}
+
+/* One step in C (see "C step"); 1: done (state updated, dirty), 0: the Python step must decide. */
+static int kernel_step(Instance *inst, double step_size) {
+    Kernel *k = &inst->k;
+    const double e_x = inst->in_val[0], e_y = inst->in_val[1], v_x = inst->in_val[2], v_y = inst->in_val[3];
+    const double w_i = inst->in_val[4], w_o = inst->in_val[5];
+    /* BallBearing.check_inputs: decided here only when clearly fine */
+    if (!isfinite(e_x + e_y + v_x + v_y + w_i + w_o)) return 0;
+    if (!(sqrt(e_x * e_x + e_y * e_y) < k->limit * (1.0 - 1e-9))) return 0;
+    if (!(step_size >= 0.0)) return 0;
+    /* BallBearing.advance_cage */
+    const double cage_angle = k->cage_angle + step_size * (w_i * k->w_inner + w_o * k->w_outer);
+    /* BallBearing.evaluate (damping_model 0 or 1: C is the constant damping or 0.0) */
+    const double c = cos(cage_angle), s = sin(cage_angle);
+    const double ex = c * e_x + s * e_y, ey = c * e_y - s * e_x;
+    const double vx = c * v_x + s * v_y, vy = c * v_y - s * v_x;
+    const double K = k->K, half = k->half, K15 = 1.5 * K, C = k->C;
+    double fx = 0.0, fy = 0.0, kxx = 0.0, kxy = 0.0, kyy = 0.0, cc = 0.0, cs_ = 0.0, ss = 0.0, f_max = 0.0;
+    int n_loaded = 0, r;
+    double *loads = k->scratch;
+    for (r = 0; r < k->n_balls; r++) {
+        const double *b = k->balls + 5 * r;
+        const double cr = b[0], sr = b[1], crr = b[2], crs = b[3], srr = b[4];
+        const double delta = ex * cr + ey * sr - half;
+        if (delta <= 0.0) {
+            loads[r] = 0.0;
+            continue;
+        }
+        const double root = sqrt(delta);
+        const double w = K * delta * root;
+        const double vr = vx * cr + vy * sr;
+        const double kt = K15 * root;
+        const double f = w + C * vr;
+        if (f <= 0.0) {
+            loads[r] = 0.0;
+            continue;
+        }
+        loads[r] = f;
+        fx += f * cr;
+        fy += f * sr;
+        kxx += kt * crr;
+        kxy += kt * crs;
+        kyy += kt * srr;
+        cc += C * crr;
+        cs_ += C * crs;
+        ss += C * srr;
+        n_loaded += 1;
+        if (f > f_max) f_max = f;
+    }
+    const double c2 = c * c, s2 = s * s, cs2 = c * s;
+    double out[K_OUTPUTS];
+    out[0] = c * fx - s * fy;
+    out[1] = s * fx + c * fy;
+    out[2] = c2 * kxx - 2.0 * cs2 * kxy + s2 * kyy;
+    out[3] = cs2 * (kxx - kyy) + (c2 - s2) * kxy;
+    out[4] = s2 * kxx + 2.0 * cs2 * kxy + c2 * kyy;
+    out[5] = c2 * cc - 2.0 * cs2 * cs_ + s2 * ss;
+    out[6] = cs2 * (cc - ss) + (c2 - s2) * cs_;
+    out[7] = s2 * cc + 2.0 * cs2 * cs_ + c2 * ss;
+    out[8] = (double)n_loaded;
+    out[9] = f_max;
+    /* BearingStepping._evaluate's check */
+    if (!isfinite(out[0] + out[1] + out[2] + out[3] + out[4] + out[5] + out[6] + out[7] + out[9] + cage_angle))
+        return 0;
+    /* LifeAccumulator.add(loads, w_i, w_o, step_size) with the end-of-step loads */
+    double life[K_LIFE];
+    memcpy(life, k->life, sizeof life);
+    if (k->life_on) {
+        const int z = k->n_balls;
+        const double p_e = k->p_e;
+        double s3 = 0.0, s103 = 0.0;
+        for (r = 0; r < z; r++) {
+            const double q = loads[r];
+            if (q > 0.0) {
+                s3 += q * q * q;
+                const double qp = pow(q, p_e);
+                if (!isfinite(qp)) return 0;   /* float ** raises OverflowError there: Python decides */
+                s103 += qp;
+            }
+        }
+        const double dn = fabs(w_i - w_o) * step_size / k->two_pi;
+        if (s3 > 0.0) {
+            const double q_rot3 = s3 / z;
+            const double base = s103 / z;
+            const double q_stat3 = pow(base, k->cube_of_stationary);
+            if (!isfinite(q_stat3) && isfinite(base)) return 0;   /* OverflowError in Python */
+            if (fabs(w_i - k->load_angular_velocity) >= fabs(w_o - k->load_angular_velocity)) {
+                life[0] += q_rot3 * dn;
+                life[1] += q_stat3 * dn;
+            } else {
+                life[0] += q_stat3 * dn;
+                life[1] += q_rot3 * dn;
+            }
+        }
+        life[2] += dn;
+        life[3] += step_size;
+    }
+    /* accepted: the slave's _evaluate and add assign */
+    k->cage_angle = cage_angle;
+    memcpy(k->out, out, sizeof out);
+    memcpy(k->life, life, sizeof life);
+    memcpy(k->loads, loads, (size_t)k->n_balls * sizeof(double));
+    for (r = k->n_balls; r < k->capacity; r++) k->loads[r] = 0.0;   /* _scratch beyond n_balls: never written */
+    inst->k_dirty = 1;
+    inst->k_steps++;
+    return 1;
+}
+
+/* fmi2GetReal of an output the kernel computes (not loaded_balls: an Integer); 1 if vr is one */
+static int kernel_real(const Instance *inst, fmi2ValueReference vr, fmi2Real *v) {
+    const Kernel *k = &inst->k;
+    for (int i = 0; i < K_OUTPUTS; i++)
+        if (i != 8 && k->out_vr[i] == vr) {
+            *v = k->out[i];
+            return 1;
+        }
+    if (vr == k->cage_vr) {
+        *v = k->cage_angle;
+        return 1;
+    }
+    if (vr >= k->load_vr0 && vr - k->load_vr0 < (fmi2ValueReference)k->capacity) {
+        *v = k->loads[vr - k->load_vr0];
+        return 1;
+    }
+    return 0;
 }
 
 /* Pass the inputs set here and not yet to the slave on to it, in one fmi2SetReal. */
@@ -840,8 +1163,12 @@ static fmi2Status flush_inputs(Instance *inst) {
 /* Before a call is forwarded to pythonfmu: the slave gets the stored inputs; a call that may change
    inputs or outputs (``mutates``) drops the copies. */
 static fmi2Status before_forward(Instance *inst, int mutates) {
-    fmi2Status status = flush_inputs(inst);
-    if (mutates) inst->in_valid = inst->out_valid = 0;
+    fmi2Status status = kernel_push(inst);    /* the C step's state first (inputs included) */
+    if (status <= fmi2Warning) status = flush_inputs(inst);
+    if (mutates) {
+        inst->in_valid = inst->out_valid = inst->k_valid = 0;
+        inst->k_retry = inst->k_load != NULL;   /* the kernel reloads before its next step */
+    }
     return status;
 }
 
@@ -863,7 +1190,7 @@ static int input_index(const Instance *inst, fmi2ValueReference vr) {
         attach_thread();                                                                          \
         Instance *inst_ = (Instance *)c;                                                          \
         inst_->direct_error = 0;                                                                  \
-        if (inst_->in_dirty || inst_->in_valid || inst_->out_valid) {                             \
+        if (inst_->in_dirty || inst_->in_valid || inst_->out_valid || inst_->k_load != NULL) {    \
             fmi2Status flushed_ = before_forward(inst_, mutating_call(#name));                    \
             if (flushed_ > fmi2Warning) return flushed_;                                          \
         }                                                                                         \
@@ -890,7 +1217,7 @@ EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], si
             return fmi2OK;
         }
     }
-    if (inst->in_dirty || inst->in_valid || inst->out_valid) {
+    if (inst->in_dirty || inst->in_valid || inst->out_valid || inst->k_load != NULL) {
         fmi2Status flushed = before_forward(inst, 1);
         if (flushed > fmi2Warning) return flushed;
     }
@@ -910,18 +1237,40 @@ EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], si
                 v[i] = inst->in_val[k];
                 continue;
             }
-            if (k >= 0 || !inst->out_valid) break;
+            if (k >= 0) break;
+            if (inst->k_valid && kernel_real(inst, vr[i], &v[i])) continue;
+            if (!inst->out_valid) break;
             for (k = 0; k < inst->n_out && inst->out_vr[k] != vr[i]; k++) {}
             if (k == inst->n_out) break;
             v[i] = inst->out_val[k];
         }
         if (i == n) return fmi2OK;
     }
-    if (inst->in_dirty) {
-        fmi2Status flushed = flush_inputs(inst);
+    if (inst->in_dirty || inst->k_dirty) {
+        fmi2Status flushed = before_forward(inst, 0);
         if (flushed > fmi2Warning) return flushed;
     }
     return fmi.GetReal(inst->inner, vr, n, v);
+}
+
+EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    if (inst->fast_on && inst->k_valid && n > 0 && vr != NULL && v != NULL) {   /* loaded_balls */
+        size_t i;
+        for (i = 0; i < n && vr[i] == inst->k.out_vr[8]; i++) {}
+        if (i == n) {
+            for (i = 0; i < n; i++) v[i] = (fmi2Integer)inst->k.out[8];
+            return fmi2OK;
+        }
+    }
+    if (inst->in_dirty || inst->in_valid || inst->out_valid || inst->k_load != NULL) {
+        fmi2Status flushed = before_forward(inst, 0);
+        if (flushed > fmi2Warning) return flushed;
+    }
+    return fmi.GetInteger(inst->inner, vr, n, v);
 }
 
 /* One call of the slave's step with the current inputs (in_val complete: in_valid). */
@@ -1000,8 +1349,29 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
         if (status <= fmi2Warning) status = fmi.GetReal(inst->inner, inst->in_vr, (size_t)inst->n_in, inst->in_val);
         inst->in_valid = status <= fmi2Warning;
     }
-    if (inst->fast_on && inst->in_valid) return fast_step(inst, t, h);
-    if (inst->in_dirty || inst->in_valid || inst->out_valid) {
+    if (inst->fast_on && inst->in_valid) {
+        if (inst->k_load != NULL) {
+            if (!inst->k_valid && inst->k_retry) {
+                inst->k_retry = 0;
+                inst->k_valid = kernel_load(inst);
+            }
+            if (inst->k_valid) {
+                if (kernel_step(inst, h)) {
+                    inst->out_valid = 0;
+                    return fmi2OK;
+                }
+                /* the Python step decides (see "C step"), on the slave as the kernel left it */
+                fmi2Status pushed = kernel_push(inst);
+                if (pushed > fmi2Warning) return pushed;
+                inst->k_valid = 0;
+                inst->k_retry = 1;
+            }
+        }
+        fmi2Status status = fast_step(inst, t, h);
+        if (status != fmi2OK && inst->k_load != NULL) inst->k_retry = 1;   /* a pending error was consumed */
+        return status;
+    }
+    if (inst->in_dirty || inst->in_valid || inst->out_valid || inst->k_load != NULL) {
         fmi2Status flushed = before_forward(inst, 1);
         if (flushed > fmi2Warning) return flushed;
     }
@@ -1101,7 +1471,7 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
             sources[i * nKnown + j] = table[k][2];
         }
     }
-    status = fmi.GetReal(inst->inner, sources, n, partials);  /* the tangent outputs, in one call */
+    status = fmi2GetReal(c, sources, n, partials);  /* the tangent outputs, in one call (the C step's too) */
     if (status <= fmi2Warning) {
         for (i = 0; i < nUnknown; i++) {
             double sum = 0.0;

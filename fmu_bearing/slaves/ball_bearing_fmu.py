@@ -29,7 +29,7 @@ from pythonfmu.enums import Fmi2Status
 
 from fmu_bearing import ball_bearing as physics
 from fmu_bearing import life
-from fmu_bearing.parameters import BearingParameters, validate
+from fmu_bearing.parameters import DAMPING_CONSTANT, DAMPING_NONE, BearingParameters, validate
 from fmu_bearing.interface import COUPLING_OUTPUTS, JOINT_INPUTS
 from fmu_bearing.slaves import (INVALID_STATE, HostLogger, add_initial_unknowns, add_unit_definitions,
                                 guard_pythonfmu_exit, hold_before_raise, loader_libraries, read_build_options,
@@ -88,6 +88,22 @@ def register_fast_step(resources, step, log_queue, input_vrs, outputs) -> bool:
         if register(step, log_queue, (ctypes.c_uint * n_in)(*input_vrs), n_in,
                     (ctypes.c_uint * n_out)(*(vr for vr, _ in outputs)),
                     (ctypes.c_int * n_out)(*(k for _, k in outputs)), n_out):
+            return True
+    return False
+
+
+def register_kernel(resources, load, store) -> bool:
+    """Hand the loader the C step's two callables (``bearingLoaderRegisterKernel``, fmu_bearing/native/loader.c,
+    "C step"), after ``register_fast_step`` succeeded: ``load()`` gives the constants and state of the step for
+    the kernel (None: the Python step), ``store(values)`` takes the kernel's state back before any call the
+    loader forwards. False: not registered (no loader, no fast path, or BEARING_FMU_C_STEP=0)."""
+    for library in loader_libraries(resources, ctypes.PyDLL):   # PyDLL: called with the GIL held
+        register = getattr(library, "bearingLoaderRegisterKernel", None)
+        if register is None:
+            continue
+        register.restype = ctypes.c_int
+        register.argtypes = [ctypes.py_object, ctypes.py_object]
+        if register(load, store):
             return True
     return False
 
@@ -219,6 +235,12 @@ class BallBearing(Fmi2Slave, BearingStepping):
         self._fast_path = register_fast_step(
             self.resources, self._fast_step, self.log_queue, _INPUT_VRS,
             [(vr_of[name], k) for k, (name, unit, _) in enumerate(FORCE_OUTPUTS) if unit is not None])
+        # The C step (loader.c, "C step"): the value references of the outputs it answers
+        loads = [vr_of[f"ball_load_{k + 1}"] for k in range(self.capacity)]
+        assert loads == list(range(loads[0], loads[0] + self.capacity)), "ball_load_i: consecutive references"
+        self._kernel_vrs = tuple(float(vr_of[name]) for name, _, _ in FORCE_OUTPUTS) + (
+            float(vr_of[CAGE_ANGLE[0]]), float(loads[0]))
+        self._c_step = self._fast_path and register_kernel(self.resources, self._kernel_load, self._kernel_store)
 
     # --- registration helpers (build time and instantiation only) ------------------------------
     def _register(self, cls, name, start, description, type_attributes, **kwargs):
@@ -280,6 +302,54 @@ class BallBearing(Fmi2Slave, BearingStepping):
         self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer = (
             e_x, e_y, v_x, v_y, omega_inner, omega_outer)
         return self._force if self.do_step(current_time, step_size) else None
+
+    # --- the loader's C step (fmu_bearing/native/loader.c, "C step") --------------------------------
+    def _kernel_load(self):
+        """What the loader's C step needs, as one flat tuple of numbers (layout: loader.c, kernel_load):
+        header (n_balls, capacity, life on, K, half clearance, C, w_inner, w_outer, eccentricity limit,
+        p e, p/p e, 2 pi, load angular velocity, value references of the 10 BearingForce outputs, cage_angle,
+        ball_load_1), state (cage_angle, the 10 outputs, the life sums, the capacity ball loads), then the ball
+        table of BallBearing (cos, sin, cos^2, cos sin, sin^2 per ball) -- the doubles Python computed, so
+        the C step's arithmetic starts from the same numbers. None: the Python step does the next step (not
+        initialised, terminated, an error to report, or the oil-film damping, which has no C step)."""
+        try:
+            bearing, accumulator = self._bearing, self._life
+            if (bearing is None or self._pending_error is not None or self._terminated
+                    or bearing.damping_model not in (DAMPING_NONE, DAMPING_CONSTANT) or bearing._oil is not None
+                    or len(self._loads) != self.capacity
+                    or (accumulator is not None and accumulator.n_balls != bearing.n_balls)):
+                return None
+            damping = bearing.damping_coefficient if bearing.damping_model == DAMPING_CONSTANT else 0.0
+            sums = accumulator.state() if accumulator is not None else [0.0] * len(life.LifeAccumulator.STATE_FIELDS)
+            header = (float(bearing.n_balls), float(self.capacity), 0.0 if accumulator is None else 1.0,
+                      bearing.stiffness, bearing.half_clearance, damping, bearing._w_inner, bearing._w_outer,
+                      bearing.eccentricity_limit, life.P_STATIONARY, life._CUBE_OF_STATIONARY, life._TWO_PI, 0.0)
+            state = (self.cage_angle, self.F_x, self.F_y, self.stiffness_xx, self.stiffness_xy, self.stiffness_yy,
+                     self.damping_xx, self.damping_xy, self.damping_yy, float(self.loaded_balls), self.max_ball_load)
+            balls = tuple(x for row in bearing._balls for x in row[1:])
+            return header + self._kernel_vrs + state + tuple(sums) + tuple(self._loads) + balls
+        except Exception:   # never let an exception reach the loader: the Python step then
+            return None
+
+    def _kernel_store(self, values):
+        """Take the C step's state (inputs, cage_angle, the 10 BearingForce outputs, life sums, ball loads): the
+        slave is then as the Python step would have left it. True, or None on failure (the loader reports it)."""
+        try:
+            (self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer,
+             self.cage_angle) = values[:7]
+            f = values[7:17]
+            r = physics.BearingForce(*f[:8], int(f[8]), f[9])
+            (self.F_x, self.F_y, self.stiffness_xx, self.stiffness_xy, self.stiffness_yy,
+             self.damping_xx, self.damping_xy, self.damping_yy, self.loaded_balls, self.max_ball_load) = r
+            self._force = r
+            if self._life is not None:
+                acc = self._life
+                acc.sum_cubed_inner, acc.sum_cubed_outer, acc.revolutions, acc.time = values[17:21]
+            self._loads[:] = values[21:]
+            self._scratch[:] = values[21:]
+            return True
+        except Exception:
+            return None
 
     def terminate(self):
         self._terminated, self._bearing = True, None   # a later doStep is refused (fmi2Discard, logged)
