@@ -1,0 +1,308 @@
+"""The loader's C step (fmu_bearing/native/loader.c, "C step") gives the Python step's doubles, bit for bit.
+
+With the C step the loader does the whole BallBearing doStep in C (damping_model 0 and 1) and pushes its state
+into the Python slave before any call it forwards. Here the same FMU runs side by side in this process:
+  * "c":      through its loader with the C step (the default);
+  * "python": through pythonfmu's binary alone (no loader: the Python step, what the FMU did before).
+Both get the same calls; every status, every value (compared as bits: NaN and -0.0 too) and every message to
+the host must be the same. The loader's step counter (bearingLoaderKernelSteps) proves that the C step ran, and
+BEARING_FMU_C_STEP=0 that the switch turns it off. A whole master run must write the same CSV either way.
+"""
+from __future__ import annotations
+
+import ctypes
+import filecmp
+import math
+import os
+import random
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from test_loader_fastpath import COUPLING, INPUTS, OK, Raw, _extract, _inputs, _run, _script
+
+ROOT = Path(__file__).resolve().parents[1]
+DISCARD = 2
+
+
+@pytest.fixture(scope="module")
+def model(ball_bearing_fmu):
+    from fmpy import read_model_description
+    md = read_model_description(str(ball_bearing_fmu))
+    return md, {v.name: v.valueReference for v in md.modelVariables}, md.modelVariables
+
+
+class Pair:
+    """The FMU with the C step (``c``) and through pythonfmu alone (``python``), driven with the same calls."""
+
+    def __init__(self, fmu, md, tmp_path, kernel="1"):
+        self.allow_overlap = next(v.valueReference for v in md.modelVariables if v.name == "allow_ball_overlap")
+        self.c = Raw(_extract(fmu, tmp_path / "loader", True), md, "bearing")
+        self.python = Raw(_extract(fmu, tmp_path / "pythonfmu", False), md, "bearing")
+        self.kernel = kernel
+
+    def both(self):
+        return self.c, self.python
+
+    def start(self, inputs, ints=(), reals=()):
+        """Instantiate both (the C step switched by BEARING_FMU_C_STEP = ``kernel`` at instantiation) with
+        the parameters ``ints`` / ``reals`` ((vr, value) pairs) and initialise them at ``inputs``."""
+        for fmu in self.both():
+            old = os.environ.get("BEARING_FMU_C_STEP")
+            os.environ["BEARING_FMU_C_STEP"] = self.kernel
+            try:
+                fmu.fmu.instantiate(loggingOn=False)
+            finally:
+                if old is None:
+                    del os.environ["BEARING_FMU_C_STEP"]
+                else:
+                    os.environ["BEARING_FMU_C_STEP"] = old
+            fmu.fmu.setupExperiment(startTime=0.0)
+            fmu.fmu.enterInitializationMode()
+            for vr, value in ints:
+                assert fmu.set_integer([vr], [value]) == OK
+            if ints:   # the paper's 15- and 20-ball studies: more balls than fit the default geometry
+                fmu.fmu.setBoolean([self.allow_overlap], [True])
+            for vr, value in reals:
+                assert fmu.set_real([vr], [value]) == OK
+            assert fmu.set_real(list(range(6)), inputs) == OK
+            fmu.fmu.exitInitializationMode()
+
+    def kernel_steps(self) -> int:
+        function = self.c.dll.bearingLoaderKernelSteps
+        function.argtypes, function.restype = [ctypes.c_void_p], ctypes.c_longlong
+        return function(self.c.fmu.component)
+
+    def free(self):
+        for fmu in self.both():
+            try:
+                fmu.free()
+            except Exception:
+                pass
+
+
+@pytest.fixture
+def pair(ball_bearing_fmu, model, tmp_path):
+    md, _, _ = model
+    p = Pair(ball_bearing_fmu, md, tmp_path)
+    yield p
+    p.free()
+
+
+def _same(pair, capsys, call):
+    """call(fmu) on both FMUs; the results and what reached the host's logger (stdout) must be the same."""
+    got = []
+    for fmu in pair.both():
+        capsys.readouterr()
+        result = call(fmu)
+        got.append((result, capsys.readouterr().out))
+    assert got[0] == got[1]
+    return got[0][0]
+
+
+def _real_vrs(variables):
+    return [v.valueReference for v in variables if v.type == "Real"]
+
+
+@pytest.mark.parametrize("n_balls", [8, 15, 20])
+@pytest.mark.parametrize("damping", [(0, 50.0), (1, 0.0), (1, 50.0)], ids=["none", "C0", "C50"])
+def test_c_step_equals_python_step_bit_for_bit(pair, model, capsys, n_balls, damping):
+    """Random inputs in and out of the load zone, random step sizes; every output after every step; now and
+    then every Real variable (life outputs too: that read makes the loader push the C step's state)."""
+    _, vr, variables = model
+    model_, coefficient = damping
+    rng = random.Random(1000 * n_balls + 10 * model_ + int(coefficient))
+    pair.start(_inputs(rng), ints=[(vr["n_balls"], n_balls), (vr["damping_model"], model_)],
+               reals=[(vr["damping_coefficient"], coefficient)])
+    ins = [vr[n] for n in INPUTS]
+    sampled = [vr[n] for n in COUPLING + ("cage_angle",)] + [vr[f"ball_load_{k + 1}"] for k in range(20)]
+    everything = _real_vrs(variables)
+    t, ok_steps, loaded = 0.0, 0, set()
+    for i in range(600):
+        u = _inputs(rng)
+        if i % 97 == 50:
+            u[0], u[1] = 1.0, 0.0                       # |e| far over the limit: refused
+        if i % 89 == 40:
+            u[rng.randrange(6)] = rng.choice((math.nan, math.inf, -math.inf))
+        h = rng.choice((1e-5, 1e-5, 2.5e-6, 1e-4, 0.0)) if i % 71 != 30 else -1e-5
+        _same(pair, capsys, lambda f: f.set_real(ins, u))
+        status = _same(pair, capsys, lambda f: f.do_step(t, h))
+        if status == OK:
+            ok_steps += 1
+            t += h
+        _same(pair, capsys, lambda f: f.get_real(sampled))
+        loaded.add(_same(pair, capsys, lambda f: f.get_integer([vr["loaded_balls"]]))[1][0])
+        if i % 25 == 0:
+            _same(pair, capsys, lambda f: f.get_real(everything))
+    _same(pair, capsys, lambda f: f.get_real(everything))
+    assert ok_steps > 500 and len(loaded) > 2, "the script must step, in and out of the load zone"
+    assert pair.kernel_steps() > 400, "the C step did not run"
+    # the life outputs changed: the C step accumulated
+    life_vr = [vr["rating_life"], vr["equivalent_load_inner"], vr["equivalent_load_outer"]]
+    status, bits = pair.c.get_real(life_vr)
+    assert status == OK and len(set(bits)) == 3
+
+
+def test_refusals_give_the_python_message(pair, model, capsys):
+    """NaN input, |e| over the limit, a negative step: the same status and message as the Python step."""
+    _, vr, _ = model
+    pair.start([1e-5, 0.0, 0.0, 0.0, 100.0, 0.0])
+    ins = [vr[n] for n in INPUTS]
+    assert _same(pair, capsys, lambda f: f.do_step(0.0, 1e-5)) == OK
+    for inputs, h, words in (([math.nan, 0.0, 0.0, 0.0, 100.0, 0.0], 1e-5, "not a finite number"),
+                             ([1e-3, 0.0, 0.0, 0.0, 100.0, 0.0], 1e-5, "exceeds eccentricity_limit"),
+                             ([1e-5, 0.0, 0.0, 0.0, 100.0, 0.0], -1e-5, "is not >= 0")):
+        _same(pair, capsys, lambda f: f.set_real(ins, inputs))
+        got = []
+        for fmu in pair.both():
+            capsys.readouterr()
+            got.append((fmu.do_step(1e-5, h), capsys.readouterr().out))
+        assert got[0] == got[1]
+        assert got[0][0] == DISCARD and words in got[0][1], got[0]
+    _same(pair, capsys, lambda f: f.set_real(ins, [2e-5, 1e-6, 0.01, 0.0, 100.0, 5.0]))
+    before = pair.kernel_steps()
+    assert _same(pair, capsys, lambda f: f.do_step(1e-5, 1e-5)) == OK
+    assert pair.kernel_steps() == before + 1, "the C step must take over again after a refused step"
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_c_step_under_the_random_call_script(pair, model, seed):
+    """test_loader_fastpath's random sequence (sets, gets, refused parameter sets, NaN and diverged inputs, FMU
+    state save/restore/serialisation) with the C step; and fmi2Terminate, fmi2Reset, a second run."""
+    md, vr, _ = model
+    rng = random.Random(seed)
+    start = _inputs(rng)
+    ops = _script(rng, vr, 600)
+    records = []
+    for fmu in pair.both():
+        record = []
+        os.environ["BEARING_FMU_C_STEP"] = "1"
+        try:
+            fmu.start(start)
+        finally:
+            del os.environ["BEARING_FMU_C_STEP"]
+        t = _run(fmu, ops, vr, record)
+        record.append(("terminate", fmu.dll.fmi2Terminate(fmu.fmu.component)))
+        record.append(("step after terminate", fmu.do_step(t, 1e-5)))
+        record.append(("get after terminate", fmu.get_real([vr[n] for n in INPUTS + COUPLING])))
+        record.append(("reset", fmu.dll.fmi2Reset(fmu.fmu.component)))
+        fmu.state = None
+        fmu.init(start)
+        _run(fmu, ops[:150], vr, record)
+        records.append(record)
+    assert records[0] == records[1]
+    assert pair.kernel_steps() > 100, "the C step did not run"
+
+
+def test_state_across_c_steps(pair, model, capsys):
+    """Get, serialize and set the FMU state between C steps: the restored slave steps on as the Python one."""
+    _, vr, variables = model
+    rng = random.Random(5)
+    pair.start(_inputs(rng))
+    ins, everything = [vr[n] for n in INPUTS], _real_vrs(variables)
+    for i in range(30):
+        u = _inputs(rng)
+        _same(pair, capsys, lambda f: f.set_real(ins, u))
+        _same(pair, capsys, lambda f: f.do_step(i * 1e-5, 1e-5))
+    assert _same(pair, capsys, lambda f: f.save()) == OK            # after C steps: pushed first
+    after_save = _same(pair, capsys, lambda f: f.get_real(everything))
+    for i in range(30, 60):
+        u = _inputs(rng)
+        _same(pair, capsys, lambda f: f.set_real(ins, u))
+        _same(pair, capsys, lambda f: f.do_step(i * 1e-5, 1e-5))
+    assert _same(pair, capsys, lambda f: f.restore()) == OK         # the kernel reloads from the slave
+    assert _same(pair, capsys, lambda f: f.get_real(everything)) == after_save
+    assert _same(pair, capsys, lambda f: f.serialize_roundtrip())[0] == (OK, OK, OK, OK)
+    steps = pair.kernel_steps()
+    for i in range(30, 60):
+        u = _inputs(rng)
+        _same(pair, capsys, lambda f: f.set_real(ins, u))
+        _same(pair, capsys, lambda f: f.do_step(i * 1e-5, 1e-5))
+        _same(pair, capsys, lambda f: f.get_real(everything))
+    assert pair.kernel_steps() == steps + 30
+    # a parameter set after initialisation: refused by the slave, reported by the next (Python) step
+    assert _same(pair, capsys, lambda f: f.set_real([vr["radial_clearance"]], [1e-5])) == OK
+    assert _same(pair, capsys, lambda f: f.do_step(1.0, 1e-5)) == DISCARD
+    assert _same(pair, capsys, lambda f: f.do_step(1.0, 1e-5)) == OK
+    assert pair.kernel_steps() == steps + 31
+
+
+def test_directional_derivative_after_c_steps(pair, model):
+    """fmi2GetDirectionalDerivative reads the tangent outputs the C step computed."""
+    _, vr, _ = model
+    rng = random.Random(9)
+    pair.start([2e-5, 1e-5, 0.0, 0.0, 100.0, 0.0])
+    ins = [vr[n] for n in INPUTS]
+    unknown = (ctypes.c_uint * 2)(vr["F_x"], vr["F_y"])
+    known = (ctypes.c_uint * 2)(vr["e_x"], vr["v_y"])
+    seed = (ctypes.c_double * 2)(1.0, 0.5)
+    got = []
+    for fmu in pair.both():
+        rng = random.Random(9)
+        rows = []
+        for i in range(20):
+            fmu.set_real(ins, [3e-5 * rng.random(), 3e-5 * rng.random(), 0.01, 0.0, 100.0, 0.0])
+            assert fmu.do_step(i * 1e-5, 1e-5) == OK
+            out = (ctypes.c_double * 2)()
+            status = fmu.fmu.fmi2GetDirectionalDerivative(fmu.fmu.component, unknown, 2, known, 2, seed, out) \
+                if fmu is pair.c else None
+            rows.append((status, fmu.get_real([vr["stiffness_xx"], vr["damping_xy"], vr["stiffness_xy"],
+                                              vr["damping_yy"]])[1], tuple(out)))
+        got.append(rows)
+    for (status, tangents, dd), (_, tangents_py, _) in zip(*got):
+        assert status == OK and tangents == tangents_py
+        import struct
+        kxx, cxy, kxy, cyy = (struct.unpack("<d", b)[0] for b in tangents)
+        assert dd == (kxx * 1.0 + cxy * 0.5, kxy * 1.0 + cyy * 0.5)
+    assert pair.kernel_steps() == 20
+
+
+def test_oil_film_keeps_the_python_step(pair, model, capsys):
+    """damping_model 2 (oil film) has no C step: the loader's fast path runs the Python step."""
+    _, vr, variables = model
+    rng = random.Random(3)
+    pair.start(_inputs(rng), ints=[(vr["damping_model"], 2)])
+    ins, everything = [vr[n] for n in INPUTS], _real_vrs(variables)
+    for i in range(50):
+        u = _inputs(rng)
+        _same(pair, capsys, lambda f: f.set_real(ins, u))
+        assert _same(pair, capsys, lambda f: f.do_step(i * 1e-5, 1e-5)) == OK
+        _same(pair, capsys, lambda f: f.get_real(everything))
+    assert pair.kernel_steps() == 0
+
+
+def test_switch_turns_the_c_step_off(ball_bearing_fmu, model, tmp_path, capsys):
+    """BEARING_FMU_C_STEP=0 at fmi2Instantiate: no C step, the same values."""
+    md, vr, variables = model
+    pair = Pair(ball_bearing_fmu, md, tmp_path, kernel="0")
+    try:
+        rng = random.Random(4)
+        pair.start(_inputs(rng))
+        ins, everything = [vr[n] for n in INPUTS], _real_vrs(variables)
+        for i in range(50):
+            u = _inputs(rng)
+            _same(pair, capsys, lambda f: f.set_real(ins, u))
+            assert _same(pair, capsys, lambda f: f.do_step(i * 1e-5, 1e-5)) == OK
+        _same(pair, capsys, lambda f: f.get_real(everything))
+        assert pair.kernel_steps() == 0
+    finally:
+        pair.free()
+
+
+def test_master_run_is_the_same_with_and_without_the_c_step(ball_bearing_fmu, tmp_path):
+    """``python -m mechanism run --revs 0.2 --no-plots --no-ideal``: the same CSV and summary, byte for byte."""
+    outs = {}
+    for switch in ("1", "0"):
+        out = tmp_path / f"run_{switch}"
+        env = dict(os.environ, BEARING_FMU_C_STEP=switch, PYTHONPATH=str(ROOT))
+        proc = subprocess.run([sys.executable, "-m", "mechanism", "run", "--revs", "0.2", "--no-plots",
+                               "--no-ideal", "--quiet", "--fmu", str(ball_bearing_fmu), "--out", str(out)],
+                              cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+        outs[switch] = out
+    names = sorted(p.name for p in outs["1"].iterdir() if not p.name.startswith("."))   # not the lock file
+    assert "timeseries.csv" in names
+    match, mismatch, errors = filecmp.cmpfiles(outs["1"], outs["0"], names, shallow=False)
+    assert not mismatch and not errors, (mismatch, errors)
