@@ -21,6 +21,10 @@ floor of the C host's. The ratios printed at the end use those figures.
 ``--baseline OLD.fmu`` also times an earlier build of the FMU in the same run (fmpy prebuilt arrays and the
 native host, interleaved with the others), for a before/after ratio that the machine's load does not blur.
 
+The C step (issue 13's last target; loader.c, "C step"): the loader does the whole doStep in C. The rows "C
+step off" time the same FMU and loader with BEARING_FMU_C_STEP=0 (the Python step, one Python call per doStep),
+in fmpy and in the native host, interleaved with the others: the ratio on/off is the before/after of one run.
+
 The native-host cycle is the same exchange from the C host ``fmu_bearing/native/host.c`` (a separate,
 non-Python process, clean environment; timed inside the host), through the FMU's loader; and, for
 comparison, through pythonfmu's binary alone with libpython preloaded (how a native host had to run the
@@ -31,6 +35,7 @@ from __future__ import annotations
 import argparse
 import ctypes
 import math
+import os
 import statistics
 import sys
 import tempfile
@@ -53,6 +58,11 @@ TRIVIAL_REFERENCE_US = 2.0
 TRIVIAL_KEY = "exchange, fmpy fmi2* prebuilt, trivial compiled FMU (no model)"
 BASELINE_FMPY_KEY = "exchange, fmpy fmi2* prebuilt, --baseline FMU"
 BASELINE_NATIVE_KEY = "exchange, native C host, --baseline FMU"
+FMPY_KEY = "exchange, fmpy fmi2* with prebuilt ctypes arrays"
+NATIVE_KEY = "exchange, native C host through the loader"
+#: the same FMU with the loader's C step switched off (BEARING_FMU_C_STEP=0: the Python step, one call per step)
+PY_STEP_FMPY_KEY = "exchange, fmpy fmi2* prebuilt, C step off (BEARING_FMU_C_STEP=0)"
+PY_STEP_NATIVE_KEY = "exchange, native C host, C step off (BEARING_FMU_C_STEP=0)"
 
 
 def states(n=64):
@@ -94,7 +104,7 @@ def native_cycles(fmu_path: Path, tmp: Path, calls: int, repeat: int, baseline: 
     for original in plain:
         original.replace(binaries / original.name.replace("_pythonfmu", ""))
     libpython = Path(sysconfig.get_config_var("LIBDIR") or "") / (sysconfig.get_config_var("INSTSONAME") or "-")
-    cases = {"exchange, native C host through the loader": (loader_dir, clean_env())}
+    cases = {NATIVE_KEY: (loader_dir, clean_env()), PY_STEP_NATIVE_KEY: (loader_dir, clean_env(BEARING_FMU_C_STEP="0"))}
     if baseline is not None:
         cases[BASELINE_NATIVE_KEY] = (baseline_dir, clean_env())
     if plain and libpython.is_file():
@@ -176,6 +186,15 @@ def trivial_fmu(tmp: Path):
     return fmu
 
 
+def kernel_steps(slave) -> int:
+    """Steps the loader's C step did for an fmpy FMU2Slave (bearingLoaderKernelSteps; -1: no such loader)."""
+    function = getattr(slave.dll, "bearingLoaderKernelSteps", None)
+    if function is None:
+        return -1
+    function.argtypes, function.restype = [ctypes.c_void_p], ctypes.c_longlong
+    return function(slave.component)
+
+
 def find_fmu(path: str | None, tmp: Path) -> Path:
     """The FMU to measure: ``path``, or a fresh build of the current sources (never a stale dist/)."""
     if path:
@@ -239,6 +258,18 @@ def main(argv=None) -> int:
             plain_fmu.enterInitializationMode()
             plain_fmu.exitInitializationMode()
 
+        # The same FMU and loader with the C step off (read at fmi2Instantiate): the Python step per doStep.
+        os.environ["BEARING_FMU_C_STEP"] = "0"
+        try:
+            py_step_fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
+                                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bench_py_step")
+            py_step_fmu.instantiate(loggingOn=False)
+        finally:
+            del os.environ["BEARING_FMU_C_STEP"]
+        py_step_fmu.setupExperiment(startTime=0.0)
+        py_step_fmu.enterInitializationMode()
+        py_step_fmu.exitInitializationMode()
+
         # An earlier build (--baseline), through its own binary, in the same process.
         base_fmu = None
         if args.baseline:
@@ -277,6 +308,7 @@ def main(argv=None) -> int:
                 fmu.getReal(out_vrs)
 
         fmpy_prebuilt = prebuilt_loop(fmu)
+        fmpy_prebuilt_py_step = prebuilt_loop(py_step_fmu)
 
         def raw_ctypes(n):
             for i in range(n):
@@ -342,7 +374,8 @@ def main(argv=None) -> int:
         results = medians_us({
             "exchange, fmpy setReal/doStep/getReal": fmpy_convenience,
             **trivial_case,
-            "exchange, fmpy fmi2* with prebuilt ctypes arrays": fmpy_prebuilt,
+            FMPY_KEY: fmpy_prebuilt,
+            PY_STEP_FMPY_KEY: fmpy_prebuilt_py_step,
             **baseline_case,
             **plain,
             "exchange, raw ctypes function pointers": raw_ctypes,
@@ -354,9 +387,10 @@ def main(argv=None) -> int:
             "in-process evaluate, 20 balls": in_process(20),
             **restore,       # last: restoring a state sets the instance back
         }, c, r)
+        c_steps = kernel_steps(fmu), kernel_steps(py_step_fmu)
         fmu.terminate()
         fmu.freeInstance()
-        for other in (trivial, base_fmu):
+        for other in (trivial, base_fmu, py_step_fmu):
             if other is not None:
                 other.terminate()
                 other.freeInstance()
@@ -370,7 +404,8 @@ def main(argv=None) -> int:
     print(f"BallBearing FMU exchange vs in-process force law ({fmu_path.name}; median of {r} x {c} calls)")
     for name, us in results.items():
         print(f"  {name:<{width}}  {us:8.2f} us")
-    exchange = results["exchange, fmpy fmi2* with prebuilt ctypes arrays"]
+    print(f"  steps done by the loader's C step: {c_steps[0]} (C step on), {c_steps[1]} (BEARING_FMU_C_STEP=0)")
+    exchange = results[FMPY_KEY]
     in_process = results["in-process evaluate, 8 balls"]
     print(f"  ratio exchange (prebuilt arrays) / in-process evaluate (8 balls): {exchange / in_process:.1f}")
     plain_fmpy = results.get("exchange, fmpy fmi2* prebuilt, pythonfmu binary alone (no loader)")
@@ -383,6 +418,10 @@ def main(argv=None) -> int:
         print(f"  ratio fmpy (prebuilt arrays) / trivial FMU: {exchange / trivial_us:.2f} (the target 7.5 us at the "
               f"issue's {TRIVIAL_REFERENCE_US:g} us trivial cycle is a ratio of {ratio:.2f}; on this run's trivial "
               f"cycle the fmpy target scales to {ratio * trivial_us:.2f} us)")
+    print(f"  ratio C step on / off (BEARING_FMU_C_STEP=0): fmpy (prebuilt arrays) "
+          f"{exchange / results[PY_STEP_FMPY_KEY]:.2f}"
+          + (f", native host {results[NATIVE_KEY] / results[PY_STEP_NATIVE_KEY]:.2f}"
+             if PY_STEP_NATIVE_KEY in results else ""))
     base_fmpy, base_native = results.get(BASELINE_FMPY_KEY), results.get(BASELINE_NATIVE_KEY)
     if base_fmpy is not None:
         print(f"  ratio this FMU / --baseline FMU: fmpy (prebuilt arrays) {exchange / base_fmpy:.2f}"
