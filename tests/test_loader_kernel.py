@@ -306,3 +306,136 @@ def test_master_run_is_the_same_with_and_without_the_c_step(ball_bearing_fmu, tm
     assert "timeseries.csv" in names
     match, mismatch, errors = filecmp.cmpfiles(outs["1"], outs["0"], names, shallow=False)
     assert not mismatch and not errors, (mismatch, errors)
+
+
+# --- FMU states saved in C (loader.c, "FMU states in C") -------------------------------------------------------
+
+def _serialized(fmu: Raw, state) -> tuple[int, bytes]:
+    size = ctypes.c_size_t()
+    s1 = fmu.dll.fmi2SerializedFMUstateSize(fmu.fmu.component, state, ctypes.byref(size))
+    buffer = ctypes.create_string_buffer(size.value)
+    s2 = fmu.dll.fmi2SerializeFMUstate(fmu.fmu.component, state, buffer, size.value)
+    return max(s1, s2), buffer.raw
+
+
+def _states_saved_in_c(fmu: Raw) -> int:
+    function = fmu.dll.bearingLoaderKernelStates
+    function.argtypes, function.restype = [ctypes.c_void_p], ctypes.c_longlong
+    return function(fmu.fmu.component)
+
+
+class Side:
+    """Two instances "a" and "b" of the FMU through one binary (the loader with the C step, or pythonfmu alone)."""
+
+    def __init__(self, folder: Path, md):
+        self.a, self.b = Raw(folder, md, "a"), Raw(folder, md, "b")
+        self.states = {}
+
+    def get(self, fmu, key):
+        state = self.states.get(key) or ctypes.c_void_p()
+        status = fmu.dll.fmi2GetFMUstate(fmu.fmu.component, ctypes.byref(state))
+        self.states[key] = state
+        return status
+
+    def free_state(self, fmu, key):
+        return fmu.dll.fmi2FreeFMUstate(fmu.fmu.component, ctypes.byref(self.states.pop(key)))
+
+
+@pytest.fixture
+def sides(ball_bearing_fmu, model, tmp_path):
+    md, _, _ = model
+    c = Side(_extract(ball_bearing_fmu, tmp_path / "loader", True), md)
+    python = Side(_extract(ball_bearing_fmu, tmp_path / "pythonfmu", False), md)
+    yield c, python
+    for side in (c, python):
+        for fmu in (side.a,) if getattr(side, "freed", False) else (side.a, side.b):
+            try:
+                fmu.free()
+            except Exception:
+                pass
+
+
+def test_fmu_states_saved_in_c_behave_as_pythonfmus(sides, model, capsys):
+    """States saved while the C step owns the state: restored on the same instance (stepping between), reused
+    by fmi2GetFMUstate, serialized (the same bytes as pythonfmu's), set on another instance (same parameters:
+    accepted; other parameters: refused with the slave's message), after fmi2Terminate, after fmi2Reset and
+    after the saving instance was freed -- every status, value and message as through pythonfmu alone."""
+    _, vr, variables = model
+    everything = _real_vrs(variables)
+    ins = [vr[n] for n in INPUTS]
+    rng = random.Random(21)
+    steps = [_inputs(rng) for _ in range(40)]
+    records = []
+    for side in sides:
+        out = []
+
+        def log(*item):
+            out.append(item + (capsys.readouterr().out,))
+
+        capsys.readouterr()
+        for fmu, n_balls in ((side.a, 8), (side.b, 8)):
+            fmu.fmu.instantiate(loggingOn=False)
+            fmu.fmu.setupExperiment(startTime=0.0)
+            fmu.fmu.enterInitializationMode()
+            fmu.set_integer([vr["n_balls"]], [n_balls])
+            fmu.set_real(ins, steps[0])
+            fmu.fmu.exitInitializationMode()
+        a, b = side.a, side.b
+
+        def run(fmu, first, last):
+            for i in range(first, last):
+                log("set", fmu.set_real(ins, steps[i]))
+                log("step", fmu.do_step(i * 1e-5, 1e-5))
+                log("get", fmu.get_real([vr["F_x"], vr["cage_angle"], vr["ball_load_1"]]))
+
+        run(a, 0, 10)
+        log("save s1", side.get(a, "s1"))
+        run(a, 10, 20)
+        log("save s2", side.get(a, "s2"))
+        log("all", a.get_real(everything))
+        run(a, 20, 25)
+        log("restore s1", a.dll.fmi2SetFMUstate(a.fmu.component, side.states["s1"]))
+        log("all", a.get_real(everything))
+        run(a, 10, 20)                                              # the same steps again: the same values
+        log("all", a.get_real(everything))
+        log("update s1", side.get(a, "s1"))                         # *state != NULL: updated in place
+        run(a, 20, 22)
+        log("restore s1", a.dll.fmi2SetFMUstate(a.fmu.component, side.states["s1"]))
+        log("all", a.get_real(everything))
+        log("serialize s2", _serialized(a, side.states["s2"]))
+        log("s2 on b", b.dll.fmi2SetFMUstate(b.fmu.component, side.states["s2"]))
+        log("all b", b.get_real(everything))
+        run(b, 20, 25)
+        log("b save", side.get(b, "sb"))
+        log("terminate a", a.dll.fmi2Terminate(a.fmu.component))
+        log("s1 after terminate", a.dll.fmi2SetFMUstate(a.fmu.component, side.states["s1"]))
+        log("all", a.get_real(everything))
+        log("step after terminate", a.do_step(1.0, 1e-5))
+        log("reset a", a.dll.fmi2Reset(a.fmu.component))
+        a.fmu.setupExperiment(startTime=0.0)
+        a.fmu.enterInitializationMode()
+        a.set_integer([vr["n_balls"]], [9])                         # other parameters after the reset
+        a.set_real(ins, steps[0])
+        a.fmu.exitInitializationMode()
+        run(a, 0, 5)
+        log("old s2 on reinitialised a", a.dll.fmi2SetFMUstate(a.fmu.component, side.states["s2"]))
+        log("step", a.do_step(2.0, 1e-5))
+        log("sb on a", a.dll.fmi2SetFMUstate(a.fmu.component, side.states["sb"]))
+        log("all", a.get_real(everything))
+        log("save s3", side.get(a, "s3"))
+        run(a, 5, 8)
+        b.free()                                                    # sb's instance is freed
+        side.freed = True
+        side.states.pop("sb", None)
+        log("s3", a.dll.fmi2SetFMUstate(a.fmu.component, side.states["s3"]))
+        log("all", a.get_real(everything))
+        for key in list(side.states):
+            if key != "sb":
+                log("free", key, side.free_state(a, key))
+        records.append(out)
+    assert _states_saved_in_c(sides[0].a) == 3, "s1, s2 and the update of s1 are saved in C"
+    assert len(records[0]) == len(records[1])
+    for x, y in zip(*records):
+        assert x == y
+    refused = [r for r in records[0] if r[0] in ("old s2 on reinitialised a", "step")]
+    assert any(r[-1] for r in refused), "the state of another initialisation must be refused with a message"

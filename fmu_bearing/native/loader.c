@@ -133,12 +133,6 @@ typedef struct {
       (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[]), (c, vr, n, v))     \
     X(fmi2Status, SetString,                                                                                \
       (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[]), (c, vr, n, v))      \
-    X(fmi2Status, GetFMUstate, (fmi2Component c, fmi2FMUstate * s), (c, s))                                 \
-    X(fmi2Status, SetFMUstate, (fmi2Component c, fmi2FMUstate s), (c, s))                                   \
-    X(fmi2Status, FreeFMUstate, (fmi2Component c, fmi2FMUstate * s), (c, s))                                \
-    X(fmi2Status, SerializedFMUstateSize, (fmi2Component c, fmi2FMUstate s, size_t * n), (c, s, n))         \
-    X(fmi2Status, SerializeFMUstate, (fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t n),             \
-      (c, s, b, n))                                                                                         \
     X(fmi2Status, DeSerializeFMUstate, (fmi2Component c, const fmi2Byte b[], size_t n, fmi2FMUstate * s),   \
       (c, b, n, s))                                                                                         \
     X(fmi2Status, SetRealInputDerivatives,                                                                  \
@@ -164,7 +158,13 @@ typedef struct {
       (c, vr, n, v))                                                                                        \
     X(fmi2Status, SetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]),  \
       (c, vr, n, v))                                                                                        \
-    X(fmi2Status, DoStep, (fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior), (c, t, h, noSetPrior))
+    X(fmi2Status, DoStep, (fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior), (c, t, h, noSetPrior)) \
+    X(fmi2Status, GetFMUstate, (fmi2Component c, fmi2FMUstate * s), (c, s))                                 \
+    X(fmi2Status, SetFMUstate, (fmi2Component c, fmi2FMUstate s), (c, s))                                   \
+    X(fmi2Status, FreeFMUstate, (fmi2Component c, fmi2FMUstate * s), (c, s))                                \
+    X(fmi2Status, SerializedFMUstateSize, (fmi2Component c, fmi2FMUstate s, size_t * n), (c, s, n))         \
+    X(fmi2Status, SerializeFMUstate, (fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t n),             \
+      (c, s, b, n))
 
 typedef fmi2Component (*InstantiateFn)(fmi2String, fmi2Type, fmi2String, fmi2String,
                                        const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
@@ -265,10 +265,13 @@ typedef struct {
     int k_valid;                        /* the kernel holds the slave's state (spec and state loaded) */
     int k_dirty;                        /* the kernel stepped since the last push: the slave is behind */
     long long k_steps;                  /* steps done in C (tests: bearingLoaderKernelSteps) */
+    long long k_states;                 /* FMU states saved in C (tests: bearingLoaderKernelStates) */
     Kernel k;
 } Instance;
 
 static void drop_step(Instance *inst);
+static void materialise_all(Instance *inst);
+static void disown_all(Instance *inst);
 
 /* The live instances, so bearingLoaderHostCallbacks can tell one of ours from any other pointer without
    dereferencing it. */
@@ -762,6 +765,8 @@ EXPORT void fmi2FreeInstance(fmi2Component c) {
     Instance *inst = (Instance *)c;
     if (inst == NULL) return;
     attach_thread();
+    materialise_all(inst);      /* states saved in C become pythonfmu's before the slave goes */
+    disown_all(inst);
     drop_step(inst);            /* before pythonfmu releases the slave: the callable holds it */
     fmi.FreeInstance(inst->inner);
     remember(inst, 0);
@@ -979,11 +984,10 @@ static int kernel_load(Instance *inst) {
     return ok;
 }
 
-/* Push the kernel's state into the slave (kernel_store) if it stepped since the last push. */
-static fmi2Status kernel_push(Instance *inst) {
-    Kernel *k = &inst->k;
-    if (!inst->k_dirty) return fmi2OK;
-    int n = 6 + K_STATE + k->capacity, i, j = 0, ok = 0;
+/* kernel_store(inputs, cage angle, outputs, life sums, ball loads): 1 on success (takes the GIL) */
+static int store_values(Instance *inst, const double *in, double cage_angle, const double *out, const double *life,
+                        const double *loads) {
+    int n = 6 + K_STATE + inst->k.capacity, i, j = 0, ok = 0;
     PyGILState_STATE g = py.GILState_Ensure();
     void *tuple = py.Tuple_New(n), *r = NULL;
     if (tuple != NULL) {
@@ -994,11 +998,11 @@ static fmi2Status kernel_push(Instance *inst) {
         if (item_ == NULL) ok = 0; else py.Tuple_SetItem(tuple, j, item_); \
         j++;                                                    \
     } while (0)
-        for (i = 0; i < 6; i++) PUT(inst->in_val[i]);
-        PUT(k->cage_angle);
-        for (i = 0; i < K_OUTPUTS; i++) PUT(k->out[i]);
-        for (i = 0; i < K_LIFE; i++) PUT(k->life[i]);
-        for (i = 0; i < k->capacity; i++) PUT(k->loads[i]);
+        for (i = 0; i < 6; i++) PUT(in[i]);
+        PUT(cage_angle);
+        for (i = 0; i < K_OUTPUTS; i++) PUT(out[i]);
+        for (i = 0; i < K_LIFE; i++) PUT(life[i]);
+        for (i = 0; i < inst->k.capacity; i++) PUT(loads[i]);
 #undef PUT
         if (ok) r = call_python(inst->k_store, tuple);
         py.DecRef(tuple);
@@ -1007,6 +1011,14 @@ static fmi2Status kernel_push(Instance *inst) {
     if (r != NULL) py.DecRef(r);
     if (py.Err_Occurred() != NULL) py.Err_Clear();
     py.GILState_Release(g);
+    return ok;
+}
+
+/* Push the kernel's state into the slave (kernel_store) if it stepped since the last push. */
+static fmi2Status kernel_push(Instance *inst) {
+    Kernel *k = &inst->k;
+    if (!inst->k_dirty) return fmi2OK;
+    int ok = store_values(inst, inst->in_val, k->cage_angle, k->out, k->life, k->loads);
     inst->k_dirty = 0;
     if (!ok) {   /* only a failure of the Python machinery itself: the slave is behind, stop here */
         inst->fast_on = inst->in_valid = inst->out_valid = inst->k_valid = 0;
@@ -1378,6 +1390,260 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
     return fmi.DoStep(inst->inner, t, h, noSetPrior);
 }
 
+/* ---- FMU states in C ----------------------------------------------------------------------------------
+ * While the C step owns an instance's state, fmi2GetFMUstate copies it here (inputs, cage angle, outputs, life
+ * sums, ball loads: everything of a saved state that can change after initialisation; parameters and load
+ * ratings are fixed) into a CState, without a Python call; fmi2SetFMUstate of such a state on the instance
+ * that saved it copies it back (the kernel's state, pushed to the slave before the next forwarded call) or,
+ * when the C step does not own the state then, hands it to the slave with one kernel_store -- what the
+ * slave's own-state restore (_set_fmu_state of a state it saved since its initialisation) assigns. A CState
+ * is "materialised" into pythonfmu's state (kept in ``inner``) whenever pythonfmu must see it: serialisation,
+ * a set on another instance, and before its instance is reset or freed; the slave then gets exactly the state
+ * pythonfmu would have saved (the owner's state is set to it, saved, and set back). States pythonfmu made
+ * (fmi2GetFMUstate while the C step does not own the state, fmi2DeSerializeFMUstate) are pythonfmu's
+ * pointers, forwarded as before; the loader tells its CStates apart by its list (no dereference of a
+ * pointer it did not make), so foreign or doctored states are checked and refused by the slave as before. */
+typedef struct CState {
+    struct CState *next;
+    Instance *owner;                    /* the instance that saved it (NULL: freed; then ``inner`` is set) */
+    fmi2FMUstate inner;                 /* pythonfmu's state of the same content, or NULL (not materialised) */
+    int has_c;                          /* the values below are the state (not yet materialised) */
+    double in_val[6], cage_angle, out[K_OUTPUTS], life[K_LIFE];
+    double *loads;
+} CState;
+static CState *cstates;                 /* every live CState (under LOCK) */
+
+static CState *find_cstate(const void *p) {
+    CState *s;
+    LOCK();
+    for (s = cstates; s != NULL && (const void *)s != p; s = s->next) {}
+    UNLOCK();
+    return s;
+}
+
+static void unlink_cstate(CState *state) {
+    LOCK();
+    for (CState **p = &cstates; *p != NULL; p = &(*p)->next)
+        if (*p == state) {
+            *p = state->next;
+            break;
+        }
+    UNLOCK();
+}
+
+/* Make pythonfmu's state of a CState (owner alive): the owner's slave is set to it, saved, and set back. */
+static fmi2Status materialise(CState *state) {
+    Instance *o = state->owner;
+    fmi2FMUstate current = NULL, made = NULL;
+    if (!state->has_c || state->inner != NULL) return fmi2OK;
+    if (o == NULL) return fmi2Error;
+    fmi2Status status = before_forward(o, 0);   /* the slave as the C step left it */
+    if (status <= fmi2Warning) status = fmi.GetFMUstate(o->inner, &current);
+    if (status > fmi2Warning) return status;
+    if (!store_values(o, state->in_val, state->cage_angle, state->out, state->life, state->loads)) {
+        status = fmi2Error;
+    } else {
+        status = fmi.GetFMUstate(o->inner, &made);
+    }
+    fmi2Status back = fmi.SetFMUstate(o->inner, current);   /* the owner's own state: as it was */
+    fmi.FreeFMUstate(o->inner, &current);
+    if (back > fmi2Warning) {
+        o->in_valid = o->out_valid = o->k_valid = 0;
+        o->k_retry = o->k_load != NULL;
+        if (status <= fmi2Warning) status = back;
+    }
+    if (status <= fmi2Warning && made != NULL) {
+        state->inner = made;
+        state->has_c = 0;
+        free(state->loads);
+        state->loads = NULL;
+        return status;
+    }
+    if (made != NULL) fmi.FreeFMUstate(o->inner, &made);
+    return status > fmi2Warning ? status : fmi2Error;
+}
+
+/* Before an instance is reset or freed: its CStates become pythonfmu's states. */
+static void materialise_all(Instance *inst) {
+    CState *s, *mine[64];
+    int n, i, more = 1;
+    while (more) {
+        n = 0;
+        more = 0;
+        LOCK();
+        for (s = cstates; s != NULL; s = s->next)
+            if (s->owner == inst) {
+                if (s->has_c && n == 64) more = 1;
+                else if (s->has_c) mine[n++] = s;
+            }
+        UNLOCK();
+        for (i = 0; i < n; i++)
+            if (materialise(mine[i]) > fmi2Warning) {
+                mine[i]->has_c = 0;   /* cannot be made: any later use is refused (fmi2Error) */
+            }
+    }
+}
+
+static void disown_all(Instance *inst) {
+    LOCK();
+    for (CState *s = cstates; s != NULL; s = s->next)
+        if (s->owner == inst) s->owner = NULL;
+    UNLOCK();
+}
+
+EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL || state == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    CState *s = *state != NULL ? find_cstate(*state) : NULL;
+    if (inst->fast_on && inst->k_valid && (*state == NULL || s != NULL)) {   /* the C step owns the state */
+        if (s == NULL) {
+            s = (CState *)calloc(1, sizeof *s);
+            double *loads = (double *)malloc((size_t)inst->k.capacity * sizeof(double));
+            if (s == NULL || loads == NULL) {
+                free(s);
+                free(loads);
+                return fmi2Error;
+            }
+            s->loads = loads;
+            LOCK();
+            s->next = cstates;
+            cstates = s;
+            UNLOCK();
+        } else {   /* FMI: *state is a state saved earlier: update it */
+            if (s->inner != NULL) fmi.FreeFMUstate(inst->inner, &s->inner);
+            s->inner = NULL;
+            if (s->loads == NULL || s->owner != inst) {
+                double *loads = (double *)realloc(s->loads, (size_t)inst->k.capacity * sizeof(double));
+                if (loads == NULL) return fmi2Error;
+                s->loads = loads;
+            }
+        }
+        s->owner = inst;
+        s->has_c = 1;
+        memcpy(s->in_val, inst->in_val, sizeof s->in_val);
+        s->cage_angle = inst->k.cage_angle;
+        memcpy(s->out, inst->k.out, sizeof s->out);
+        memcpy(s->life, inst->k.life, sizeof s->life);
+        memcpy(s->loads, inst->k.loads, (size_t)inst->k.capacity * sizeof(double));
+        inst->k_states++;
+        *state = s;
+        return fmi2OK;
+    }
+    fmi2Status status = before_forward(inst, 0);
+    if (status > fmi2Warning) return status;
+    if (s == NULL) return fmi.GetFMUstate(inst->inner, state);
+    /* one of ours, saved while the C step owned the state: now pythonfmu's, in the same CState */
+    fmi2FMUstate made = NULL;
+    status = fmi.GetFMUstate(inst->inner, &made);
+    if (status > fmi2Warning) return status;
+    if (s->inner != NULL) fmi.FreeFMUstate(inst->inner, &s->inner);
+    free(s->loads);
+    s->loads = NULL;
+    s->inner = made;
+    s->has_c = 0;
+    s->owner = inst;
+    return status;
+}
+
+EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    CState *s = state != NULL ? find_cstate(state) : NULL;
+    if (s != NULL && s->has_c && s->owner == inst) {
+        if (inst->fast_on && inst->k_valid) {   /* back into the kernel; the slave gets it at the next push */
+            memcpy(inst->in_val, s->in_val, sizeof s->in_val);
+            inst->k.cage_angle = s->cage_angle;
+            memcpy(inst->k.out, s->out, sizeof s->out);
+            memcpy(inst->k.life, s->life, sizeof s->life);
+            memcpy(inst->k.loads, s->loads, (size_t)inst->k.capacity * sizeof(double));
+            inst->in_valid = 1;
+            inst->in_dirty = 0;
+            inst->out_valid = 0;
+            inst->k_dirty = 1;
+            return fmi2OK;
+        }
+        fmi2Status status = before_forward(inst, 1);
+        if (status > fmi2Warning) return status;
+        if (!store_values(inst, s->in_val, s->cage_angle, s->out, s->life, s->loads)) return fmi2Error;
+        inst->in_dirty = 0;
+        return fmi2OK;
+    }
+    if (s != NULL) {
+        fmi2Status status = materialise(s);   /* another instance's: pythonfmu's state, the slave checks it */
+        if (status > fmi2Warning || s->inner == NULL) return status > fmi2Warning ? status : fmi2Error;
+        state = s->inner;
+    }
+    fmi2Status flushed = before_forward(inst, 1);
+    if (flushed > fmi2Warning) return flushed;
+    return fmi.SetFMUstate(inst->inner, state);
+}
+
+EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL || state == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    CState *s = *state != NULL ? find_cstate(*state) : NULL;
+    if (s == NULL) return fmi.FreeFMUstate(inst->inner, state);
+    unlink_cstate(s);
+    fmi2Status status = fmi2OK;
+    if (s->inner != NULL) status = fmi.FreeFMUstate(inst->inner, &s->inner);
+    free(s->loads);
+    free(s);
+    *state = NULL;
+    return status;
+}
+
+/* pythonfmu's state for a serialisation call (a CState is materialised first); NULL on failure */
+static fmi2FMUstate serializable(Instance *inst, fmi2FMUstate state, fmi2Status *status) {
+    CState *s = state != NULL ? find_cstate(state) : NULL;
+    *status = before_forward(inst, 0);
+    if (s == NULL || *status > fmi2Warning) return state;
+    *status = materialise(s);
+    return s->inner;
+}
+
+EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size) {
+    Instance *inst = (Instance *)c;
+    fmi2Status status;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    fmi2FMUstate inner = serializable(inst, state, &status);
+    if (status > fmi2Warning) return status;
+    if (inner == NULL && state != NULL) return fmi2Error;
+    return fmi.SerializedFMUstateSize(inst->inner, inner, size);
+}
+
+EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
+    Instance *inst = (Instance *)c;
+    fmi2Status status;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    inst->direct_error = 0;
+    fmi2FMUstate inner = serializable(inst, state, &status);
+    if (status > fmi2Warning) return status;
+    if (inner == NULL && state != NULL) return fmi2Error;
+    return fmi.SerializeFMUstate(inst->inner, inner, bytes, size);
+}
+
+/* For tests and benchmarks: the number of FMU states ``c`` saved in C. */
+EXPORT long long bearingLoaderKernelStates(const void *c) {
+    long long n = -1;
+    LOCK();
+    for (int i = 0; i < MAX_LIVE; i++)
+        if (c != NULL && live[i] == (const Instance *)c) {
+            n = live[i]->k_states;
+            break;
+        }
+    UNLOCK();
+    return n;
+}
+
 EXPORT fmi2Status fmi2Terminate(fmi2Component c) {
     Instance *inst = (Instance *)c;
     if (inst == NULL) return fmi2Error;
@@ -1394,6 +1660,7 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c) {
     if (inst == NULL) return fmi2Error;
     attach_thread();
     inst->direct_error = 0;
+    materialise_all(inst);      /* states saved in C become pythonfmu's before the slave goes */
     drop_step(inst);            /* pythonfmu builds a new slave, which registers again */
     registering = inst;
     fmi2Status status = fmi.Reset(inst->inner);
