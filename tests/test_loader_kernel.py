@@ -402,6 +402,10 @@ def test_fmu_states_saved_in_c_behave_as_pythonfmus(sides, model, capsys):
         run(a, 20, 22)
         log("restore s1", a.dll.fmi2SetFMUstate(a.fmu.component, side.states["s1"]))
         log("all", a.get_real(everything))
+        run(a, 22, 24)
+        log("all", a.get_real(everything))                          # the slave is up to date here
+        log("restore s1", a.dll.fmi2SetFMUstate(a.fmu.component, side.states["s1"]))
+        log("all", a.get_real(everything))
         log("serialize s2", _serialized(a, side.states["s2"]))
         log("s2 on b", b.dll.fmi2SetFMUstate(b.fmu.component, side.states["s2"]))
         log("all b", b.get_real(everything))
