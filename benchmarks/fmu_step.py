@@ -52,6 +52,9 @@ INPUTS = ("e_x", "e_y", "v_x", "v_y", "omega_inner", "omega_outer")
 TARGET_IN_PROCESS_US, TARGET_EXCHANGE_US = 10.0, 25.0
 TARGET_NATIVE_US, TARGET_FMPY_US = 10.0, 7.5
 RESTORE_KEY = "fmpy setFMUstate of the instance's own state (rollback)"
+RESTORE_PY_STEP_KEY = "fmpy setFMUstate of the instance's own state, C step off"
+SAVE_KEY = "fmpy getFMUstate + freeFMUstate (a master's save per step)"
+SAVE_PY_STEP_KEY = "fmpy getFMUstate + freeFMUstate, C step off"
 BASELINE_RESTORE_KEY = "fmpy setFMUstate of the instance's own state, --baseline FMU"
 #: the issue's reference: a trivial compiled FMU costs about 2 us per cycle through fmpy (prebuilt arrays)
 TRIVIAL_REFERENCE_US = 2.0
@@ -354,17 +357,29 @@ def main(argv=None) -> int:
 
         def restore_loop(slave):
             """n fmi2SetFMUstate of a state the instance saved itself after initialisation: the masters'
-            rollback (the iterated and adaptive schemes), once per step."""
-            state = slave.getFMUstate()
+            rollback (the iterated and adaptive schemes), once per step. The state is saved at the first run
+            (after the exchange loops: stepped, as in a master), so with the C step it is saved in C."""
+            saved = []
 
             def loop(n):
-                set_state = slave.setFMUstate
+                if not saved:
+                    saved.append(slave.getFMUstate())
+                set_state, state = slave.setFMUstate, saved[0]
                 for _ in range(n):
                     set_state(state)
             return loop
 
+        def save_loop(slave):
+            """n fmi2GetFMUstate + fmi2FreeFMUstate: the masters save the FMU before every step."""
+            def loop(n):
+                get_state, free_state = slave.getFMUstate, slave.freeFMUstate
+                for _ in range(n):
+                    free_state(get_state())
+            return loop
+
         c, r = args.calls, args.repeat
-        restore = {RESTORE_KEY: restore_loop(fmu)}
+        restore = {SAVE_KEY: save_loop(fmu), SAVE_PY_STEP_KEY: save_loop(py_step_fmu),
+                   RESTORE_KEY: restore_loop(fmu), RESTORE_PY_STEP_KEY: restore_loop(py_step_fmu)}
         if base_fmu is not None:
             restore[BASELINE_RESTORE_KEY] = restore_loop(base_fmu)
         plain = {"exchange, fmpy fmi2* prebuilt, pythonfmu binary alone (no loader)": fmpy_prebuilt_plain} \
@@ -422,6 +437,8 @@ def main(argv=None) -> int:
           f"{exchange / results[PY_STEP_FMPY_KEY]:.2f}"
           + (f", native host {results[NATIVE_KEY] / results[PY_STEP_NATIVE_KEY]:.2f}"
              if PY_STEP_NATIVE_KEY in results else ""))
+    print(f"  ratio C step on / off: fmi2GetFMUstate {results[SAVE_KEY] / results[SAVE_PY_STEP_KEY]:.3f}, "
+          f"fmi2SetFMUstate of the own state {results[RESTORE_KEY] / results[RESTORE_PY_STEP_KEY]:.3f}")
     base_fmpy, base_native = results.get(BASELINE_FMPY_KEY), results.get(BASELINE_NATIVE_KEY)
     if base_fmpy is not None:
         print(f"  ratio this FMU / --baseline FMU: fmpy (prebuilt arrays) {exchange / base_fmpy:.2f}"
