@@ -45,6 +45,10 @@
  *   - serves fmi2SetReal of inputs, fmi2DoStep and fmi2GetReal of the force outputs with one Python call
  *     per step when the slave registered a step function (bearingLoaderRegisterStep; "fast path" below),
  *     with the values and statuses of pythonfmu's path;
+ *   - does the whole BallBearing doStep in C when the slave registered its kernel (bearingLoaderRegisterKernel;
+ *     damping models 0 and 1): the Python step's operations in the same order, the same doubles; its state is
+ *     pushed into the slave before any forwarded call, and fmi2Get/SetFMUstate copy it in C ("C step", "FMU
+ *     states in C" below); BEARING_FMU_C_STEP=0 at fmi2Instantiate turns it off;
  *   - implements fmi2GetDirectionalDerivative from the FMU's tangent outputs when the build gives it a
  *     table (unknown, known) -> output holding d unknown / d known (see fmu_bearing/native/build.py);
  *     pythonfmu 0.7 does not support that call.
