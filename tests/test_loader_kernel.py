@@ -162,6 +162,16 @@ def test_refusals_give_the_python_message(pair, model, capsys):
         assert got[0] == got[1]
         assert got[0][0] == DISCARD and words in got[0][1], got[0]
     _same(pair, capsys, lambda f: f.set_real(ins, [2e-5, 1e-6, 0.01, 0.0, 100.0, 5.0]))
+    assert _same(pair, capsys, lambda f: f.do_step(2e-5, 1e-5)) == OK
+    # refused gets (another type, an unknown value reference): reported by the next step, as by the slave
+    for get in (lambda f: f.get_integer([vr["F_x"]]), lambda f: f.get_real([vr["loaded_balls"]]),
+                lambda f: f.get_real([99999])):
+        _same(pair, capsys, get)
+        got = []
+        for fmu in pair.both():
+            capsys.readouterr()
+            got.append((fmu.do_step(3e-5, 1e-5), capsys.readouterr().out))
+        assert got[0] == got[1] and got[0][0] == DISCARD, got
     before = pair.kernel_steps()
     assert _same(pair, capsys, lambda f: f.do_step(1e-5, 1e-5)) == OK
     assert pair.kernel_steps() == before + 1, "the C step must take over again after a refused step"

@@ -266,6 +266,7 @@ typedef struct {
     /* the C step (see "C step" below) */
     void *k_load, *k_store;             /* PyObject*: the slave's kernel_load() and kernel_store(values), or NULL */
     int k_retry;                        /* load (again) before the next step: the slave may have changed */
+    volatile int slave_error;           /* the slave logged an error during this forwarded call (see after_forward) */
     int k_valid;                        /* the kernel holds the slave's state (spec and state loaded) */
     int k_dirty;                        /* the kernel stepped since the last push: the slave is behind */
     long long k_steps;                  /* steps done in C (tests: bearingLoaderKernelSteps) */
@@ -386,6 +387,7 @@ static void forward_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2St
         va_end(ap);
     }
     if (text == NULL) text = stack;
+    if (inst != NULL && status >= fmi2Error) inst->slave_error = 1;
     if (inst != NULL && inst->in_exit_initialization && status == fmi2Fatal)
         status = fmi2Error;  /* the message goes with the status the call returns (fmi2ExitInitializationMode) */
     if (inst != NULL && !pass_message(inst, status, category)) {
@@ -714,6 +716,7 @@ EXPORT void bearingLoaderDirectError(void *env) {
     for (int i = 0; i < MAX_LIVE; i++)
         if (env != NULL && live[i] == (Instance *)env) {
             live[i]->direct_error = 1;
+            live[i]->slave_error = 1;
             break;
         }
     UNLOCK();
@@ -1198,6 +1201,18 @@ static fmi2Status before_forward(Instance *inst, int mutates) {
 }
 
 /* Whether a forwarded fmi2<name> may change the slave's inputs or outputs (reads do not). */
+/* After a call forwarded to pythonfmu: a slave that logged an error may hold a refusal to report at the next
+   doStep (a refused get of a variable of another type, an unknown value reference): the kernel reloads, and
+   its load hands that step to the Python step. */
+static fmi2Status after_forward(Instance *inst, fmi2Status status) {
+    if (inst->slave_error && inst->k_load != NULL) {
+        inst->k_valid = 0;
+        inst->k_retry = 1;
+    }
+    inst->slave_error = 0;
+    return status;
+}
+
 static int mutating_call(const char *name) {
     return !(strncmp(name, "Get", 3) == 0 || strncmp(name, "Serialize", 9) == 0 ||
              strcmp(name, "FreeFMUstate") == 0 || strcmp(name, "DeSerializeFMUstate") == 0);
@@ -1220,7 +1235,8 @@ static int input_index(const Instance *inst, fmi2ValueReference vr) {
             if (flushed_ > fmi2Warning) return flushed_;                                          \
         }                                                                                         \
         c = inst_->inner;                                                                         \
-        return fmi.name args;                                                                     \
+        inst_->slave_error = 0;                                                                   \
+        return after_forward(inst_, fmi.name args);                                               \
     }
 FMI2_FUNCTIONS(FORWARD)
 #undef FORWARD
@@ -1275,7 +1291,8 @@ EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], si
         fmi2Status flushed = before_forward(inst, 0);
         if (flushed > fmi2Warning) return flushed;
     }
-    return fmi.GetReal(inst->inner, vr, n, v);
+    inst->slave_error = 0;
+    return after_forward(inst, fmi.GetReal(inst->inner, vr, n, v));
 }
 
 EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {
@@ -1295,7 +1312,8 @@ EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[],
         fmi2Status flushed = before_forward(inst, 0);
         if (flushed > fmi2Warning) return flushed;
     }
-    return fmi.GetInteger(inst->inner, vr, n, v);
+    inst->slave_error = 0;
+    return after_forward(inst, fmi.GetInteger(inst->inner, vr, n, v));
 }
 
 /* One call of the slave's step with the current inputs (in_val complete: in_valid). */
