@@ -345,8 +345,7 @@ class BallBearing(Fmi2Slave, BearingStepping):
             if self._life is not None:
                 acc = self._life
                 acc.sum_cubed_inner, acc.sum_cubed_outer, acc.revolutions, acc.time = values[17:21]
-            self._loads[:] = values[21:]
-            self._scratch[:] = values[21:]
+            self._loads[:] = values[21:]   # (not _scratch: evaluate rewrites its first n_balls, never the rest)
             return True
         except Exception:
             return None
