@@ -44,6 +44,24 @@ ENERGY_COLUMNS = ("contact_energy", "damping_dissipation", "drive_work", "cage_w
                   "energy_residual")
 
 
+def account_powers(system: System, bearing: BallBearing, t: float, q: np.ndarray, qd: np.ndarray, lam: np.ndarray,
+                   inputs: Sequence[float], force: Sequence[float], elastic: Sequence[float]
+                   ) -> tuple[float, float, float, float]:
+    """The time derivatives of the account's integrals [W] at one state, in the order of ``_sums``:
+    damping (F - F_el) . v, drivers lambda . Phi_t, cage omega_m (F_el x e)_z, applied Q^A . q'.
+
+    ``inputs`` = (e_x, e_y, v_x, v_y, omega_inner, omega_outer) of the link at (q, q'), ``force`` = (F_x, F_y) of
+    the law there and ``elastic`` the law at v = 0. The one home of the account's powers: the sampled account
+    (``EnergyAccount.update``) and the monolithic reference's quadrature states (``monolithic.py``) use it."""
+    ex, ey, vx, vy, wi, wo = inputs
+    fx, fy = force
+    el_x, el_y = elastic
+    return ((fx - el_x) * vx + (fy - el_y) * vy,
+            float(np.dot(lam, system.phi_t(t))) if system.m else 0.0,
+            bearing.cage_velocity(wi, wo) * (el_x * ey - el_y * ex),
+            float(np.dot(system.applied_forces(q, qd, t), qd)))
+
+
 def kinematic_cage_angle(bearing: BallBearing, link: BearingLink, angles0: tuple[float, float],
                          q: np.ndarray) -> float:
     """The kinematic cage angle [rad] at q: cage_0 plus eq. (16) applied to the changes of the ring angles
@@ -102,10 +120,8 @@ class EnergyAccount:
         cage = self.cage_angle(q)
         fx, fy, el_x, el_y, potential = self._forces(ex, ey, vx, vy, cage, wi, wo)
         system = self.system
-        powers = ((fx - el_x) * vx + (fy - el_y) * vy,                                           # damping
-                  float(np.dot(lam, system.phi_t(t))) if system.m else 0.0,                   # drivers
-                  self.bearing.cage_velocity(wi, wo) * (el_x * ey - el_y * ex),                # cage
-                  float(np.dot(system.applied_forces(q, qd, t), qd)))                          # applied
+        powers = account_powers(system, self.bearing, t, q, qd, lam, (ex, ey, vx, vy, wi, wo), (fx, fy),
+                                (el_x, el_y))
         if kinetic is None:
             kinetic = system.kinetic_energy(qd)
         if self._last is None:
