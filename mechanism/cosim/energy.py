@@ -84,6 +84,7 @@ class EnergyAccount:
     _start: float = field(default=0.0, init=False)
     _angles0: tuple = field(default=(0.0, 0.0), init=False)
     _kernel: object = field(default=None, init=False)     # the compiled law, or False without numba
+    _stage_kernel: object = field(default=None, init=False)
 
     def cage_angle(self, q: np.ndarray) -> float:
         """The kinematic cage angle [rad]: cage_0 plus eq. (16) applied to the ring angles' changes."""
@@ -109,11 +110,25 @@ class EnergyAccount:
         elastic = self.bearing.evaluate(ex, ey, 0.0, 0.0, cage, wi, wo)
         return law.F_x, law.F_y, elastic.F_x, elastic.F_y, self.bearing.elastic_energy(ex, ey, cage)
 
+    def stage_integrals(self, stages: np.ndarray, substeps: int, hs: float) -> tuple[float, float]:
+        """(D, W_cage) [J] over one integrator step from its stage states (``energy_kernel.stage_integrals``);
+        after the first ``update`` (which fixes the ring angles the kinematic cage angle starts from)."""
+        if self._stage_kernel is None:
+            from mechanism.cosim import energy_kernel, law_kernel
+            b = self.bearing
+            offset = (b.params.cage_angle_start - b.cage_velocity(self._angles0[0], self._angles0[1]))
+            self._stage_kernel = (energy_kernel.stage_integrals, law_kernel.pack_bearing(b), offset)
+        kernel, P, offset = self._stage_kernel
+        return kernel(P, stages, substeps, hs, offset)
+
     def update(self, t: float, q: np.ndarray, qd: np.ndarray, lam: np.ndarray, inputs: Sequence[float] | None = None,
-               kinetic: float | None = None) -> dict[str, float]:
+               kinetic: float | None = None, integrals: Sequence[float] | None = None) -> dict[str, float]:
         """Account up to time t [s] for the state (q, qd) and the multipliers lam of eq. (9) (model order).
 
-        ``inputs`` (the link's (e, v, omega) at (q, qd)) and ``kinetic`` (T at qd) when the caller has them."""
+        ``inputs`` (the link's (e, v, omega) at (q, qd)) and ``kinetic`` (T at qd) when the caller has them.
+        ``integrals``: (D, W_drive, W_cage, W_applied) [J] since the start, integrated by the caller's integrator
+        (the co-simulation master's RK4 stages, ``CouplingLoop``): used as they are; without them the
+        integrals are quadratures of the samples (2-step Adams-Moulton)."""
         if self._last is None:
             self._angles0 = self.link.ring_angles(q)
         ex, ey, vx, vy, wi, wo = self.link.inputs(q, qd) if inputs is None else inputs
@@ -126,6 +141,8 @@ class EnergyAccount:
             kinetic = system.kinetic_energy(qd)
         if self._last is None:
             self._start = kinetic + potential
+        elif integrals is not None:
+            self._sums[:] = [float(v) for v in integrals[:4]]
         else:
             t1, p1 = self._last
             dt = t - t1
