@@ -106,6 +106,14 @@ class EnergyAccount:
         """The kinematic cage angle [rad]: cage_0 plus eq. (16) applied to the ring angles' changes."""
         return kinematic_cage_angle(self.bearing, self.link, self._angles0, q)
 
+    def _potential(self, ex, ey, cage) -> float:
+        """The contact energy V [J] at (e, cage angle), compiled (``law_kernel.elastic_energy``) when numba is there."""
+        if self._kernel is None:
+            self._forces(ex, ey, 0.0, 0.0, cage, 0.0, 0.0)           # sets up the compiled law (or False)
+        if self._kernel:
+            return float(self._kernel[1](self._kernel[2], ex, ey, cage))
+        return self.bearing.elastic_energy(ex, ey, cage)
+
     def _forces(self, ex, ey, vx, vy, cage, wi, wo) -> tuple[float, float, float, float, float]:
         """(F_x, F_y) of the law, (F_x, F_y) at v = 0 (the elastic part) and the contact energy V [J],
         through the compiled law (``law_kernel``, held to 1e-12 against ``BallBearing``) when numba is there."""
@@ -149,10 +157,14 @@ class EnergyAccount:
             self._angles0 = self.link.ring_angles(q)
         ex, ey, vx, vy, wi, wo = self.link.inputs(q, qd) if inputs is None else inputs
         cage = self.cage_angle(q)
-        fx, fy, el_x, el_y, potential = self._forces(ex, ey, vx, vy, cage, wi, wo)
         system = self.system
-        powers = account_powers(system, self.bearing, t, q, qd, lam, (ex, ey, vx, vy, wi, wo), (fx, fy),
-                                (el_x, el_y))
+        if integrals is not None and self._last is not None:      # only V is needed at the sample
+            powers = None
+            potential = self._potential(ex, ey, cage)
+        else:
+            fx, fy, el_x, el_y, potential = self._forces(ex, ey, vx, vy, cage, wi, wo)
+            powers = account_powers(system, self.bearing, t, q, qd, lam, (ex, ey, vx, vy, wi, wo), (fx, fy),
+                                    (el_x, el_y))
         if kinetic is None:
             kinetic = system.kinetic_energy(qd)
         if self._last is None:
