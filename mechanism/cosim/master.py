@@ -323,9 +323,9 @@ class CouplingLoop:
                                                     self._I, self._R, self._L, self._LR, self._W, self._u,
                                                     self._acc, self._p1, self._stages)
                 if finite:
-                    self._integrate_energy(m, hs)
+                    self._energy_step(m, hs, finish)
         elif self.integrals is not None and endpoint is not None:   # the NumPy reference with the account
-            y = self._advance_with_energy(y, t0, hs, m)
+            y = self._advance_with_energy(y, t0, hs, m, finish)
             finite = bool(np.all(np.isfinite(y)))
             drift = None
             if self.kernels:
@@ -376,7 +376,15 @@ class CouplingLoop:
         acc = self._acc
         self.integrals += (dissipated, acc[0], cage_work, acc[1], acc[2])
 
-    def _advance_with_energy(self, y: np.ndarray, t0: float, hs: float, m: int) -> np.ndarray:
+    def _energy_step(self, m: int, hs: float, finish: bool) -> None:
+        """After a step's integration: add its integrals now, or for a pass of an iterated step (``finish=False``)
+        when ``communicate`` has accepted it (the last pass's stages stay in ``_stages``; the others are dropped)."""
+        if finish:
+            self._integrate_energy(m, hs)
+        else:
+            self._pending_energy = (m, hs)
+
+    def _advance_with_energy(self, y: np.ndarray, t0: float, hs: float, m: int, finish: bool = True) -> np.ndarray:
         """``m`` RK4 substeps of the NumPy reference with the energy account: the mechanism's powers (drivers
         lambda . Phi_t, applied Q^A . q', the bearing force Q_link . q') as three more states of the same RK4
         step, and the stage states recorded for the bearing side, as ``kernels.advance`` does."""
@@ -403,7 +411,7 @@ class CouplingLoop:
         self._stages[:5 * m] = stages
         self._acc[:] = ya[2 * n:]
         if np.all(np.isfinite(ya)):
-            self._integrate_energy(m, hs)
+            self._energy_step(m, hs, finish)
         return ya[:2 * n]
 
     def communicate(self, y: np.ndarray, t0: float, h: float, step: int, t: float | None = None,
@@ -448,6 +456,8 @@ class CouplingLoop:
         finally:
             scheme.set_trial(None)
             self.release(snap)
+        if self.integrals is not None:                # the accepted pass's energy integrals
+            self._integrate_energy(*self._pending_energy)
         stats["steps"] += 1
         stats["passes"] += passes
         stats["max_passes"] = max(stats["max_passes"], passes)

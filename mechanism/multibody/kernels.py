@@ -414,16 +414,17 @@ def powers(y, I, R, W):
     With the velocity constraints met, dT/dt is their sum (eq. 4, 7, 9); the energy account integrates them
     with the RK4 stages (``advance``)."""
     n, m, K, A = I[1], I[2], I[3], I[4]
-    lam, phit, Q = _slices(I, W)[4], _slices(I, W)[5], _slices(I, W)[7]
+    ol = m * n + 3 * m                     # lambda, Phi_t and Q in W (the layout of _slices)
+    oq = m * n + 5 * m + m * m
     drive = 0.0
     for r in range(m):
-        drive += lam[r] * phit[r]
+        drive += W[ol + r] * W[ol + m + r]
     o = H_R + 7 * K + 2 * A + n
     app = 0.0
     total = 0.0
     for i in range(n):
         app += R[o + i] * y[n + i]
-        total += Q[i] * y[n + i]
+        total += W[oq + i] * y[n + i]
     return drive, app, total - app
 
 
