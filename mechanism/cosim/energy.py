@@ -24,7 +24,8 @@ inside the integrators, not from the samples (issue 12):
 
 * the monolithic reference (``monolithic.py``) carries D, W_drive, W_cage, W_applied as ODE states, under its
   integrator's error control, the contact onsets located as events: R is its integrator's error
-  (|R| / D ~ 1e-5 ... 2e-4 over two revolutions, tests/test_energy.py);
+  (|R| / D 1e-5 ... 2e-4 over two revolutions with 8 balls, 1.4e-3 with 15/20 balls at rtol 1e-9, 3e-6 at
+  rtol 1e-10; tests/test_energy.py);
 * the co-simulation master (``master.CouplingLoop``) integrates the powers with its RK4 stages, the quadrature
   RK4 applies to a state whose derivative they are: the mechanism's powers (drivers, applied, and the bearing
   force's work on the mechanism W_link) in the step itself (``kernels.advance``, or the NumPy path), the law's
