@@ -19,10 +19,27 @@ The mechanism's energy balance, exact for the monolithic model, is then
     T + V + D - W_drive - W_applied - W_cage = T_0 + V_0,
 
 and its **residual** R = T + V + D - W_drive - W_applied - W_cage - T_0 - V_0 is the energy the coupling
-created (R > 0) or destroyed (R < 0), up to the quadrature error of the integrals (trapezoidal
-rule of the 2-step Adams-Moulton method over the samples, i.e. at the output interval; the
-trapezoidal rule where the spacing changes) and the mechanism integrator's own error.
-The monolithic reference's R measures that floor (tests/test_energy.py).
+created (R > 0) or destroyed (R < 0), up to the error of the integrals, which is why they are computed
+inside the integrators, not from the samples (issue 12):
+
+* the monolithic reference (``monolithic.py``) carries D, W_drive, W_cage, W_applied as ODE states, under its
+  integrator's error control, the contact onsets located as events: R is its integrator's error
+  (|R| / D 1e-5 ... 2e-4 over two revolutions with 8 balls, 1.4e-3 with 15/20 balls at rtol 1e-9, 3e-6 at
+  rtol 1e-10; tests/test_energy.py);
+* the co-simulation master (``master.CouplingLoop``) integrates the powers with its RK4 stages, the quadrature
+  RK4 applies to a state whose derivative they are: the mechanism's powers (drivers, applied, and the bearing
+  force's work on the mechanism W_link) in the step itself (``kernels.advance``, or the NumPy path), the law's
+  damping and cage powers at the recorded stage states with each contact onset located in its substep
+  (``energy_kernel.stage_integrals``); ``update(..., integrals=...)`` then takes them as they are. The
+  mechanism's own balance T - T_0 = W_drive + W_applied + W_link closes to the RK4 error, so R is the
+  interface's W_link + V - V_0 + D - W_cage: the bearing force the mechanism felt against what the law
+  stores and dissipates along the same motion (meta ``energy_residual_mechanism_J`` and
+  ``energy_residual_coupling_J``).
+
+Without ``integrals`` (``monolithic`` with ``energy_states=False``) the integrals are quadratures of the samples
+(2-step Adams-Moulton rule, trapezoidal where the spacing changes): at 1e-5 s sampling its error was 6 % of D
+for the reference and +8 mJ (against D = 4.4 mJ) for the co-simulation's start-up, where the multipliers at
+the samples miss the force the mechanism felt within the steps (docs/coupling.md).
 
 The cage angle used is the kinematic one, cage_0 + omega_m(Delta theta_journal, Delta theta_housing)
 (eq. 16 is linear in the ring speeds, so its time integral is the same combination of the ring
@@ -42,6 +59,24 @@ from mechanism.multibody.solver import System
 #: CSV columns of the account [J], in order
 ENERGY_COLUMNS = ("contact_energy", "damping_dissipation", "drive_work", "cage_work", "applied_work",
                   "energy_residual")
+
+
+def account_powers(system: System, bearing: BallBearing, t: float, q: np.ndarray, qd: np.ndarray, lam: np.ndarray,
+                   inputs: Sequence[float], force: Sequence[float], elastic: Sequence[float]
+                   ) -> tuple[float, float, float, float]:
+    """The time derivatives of the account's integrals [W] at one state, in the order of ``_sums``:
+    damping (F - F_el) . v, drivers lambda . Phi_t, cage omega_m (F_el x e)_z, applied Q^A . q'.
+
+    ``inputs`` = (e_x, e_y, v_x, v_y, omega_inner, omega_outer) of the link at (q, q'), ``force`` = (F_x, F_y) of
+    the law there and ``elastic`` the law at v = 0. The one home of the account's powers: the sampled account
+    (``EnergyAccount.update``) and the monolithic reference's quadrature states (``monolithic.py``) use it."""
+    ex, ey, vx, vy, wi, wo = inputs
+    fx, fy = force
+    el_x, el_y = elastic
+    return ((fx - el_x) * vx + (fy - el_y) * vy,
+            float(np.dot(lam, system.phi_t(t))) if system.m else 0.0,
+            bearing.cage_velocity(wi, wo) * (el_x * ey - el_y * ex),
+            float(np.dot(system.applied_forces(q, qd, t), qd)))
 
 
 def kinematic_cage_angle(bearing: BallBearing, link: BearingLink, angles0: tuple[float, float],
@@ -66,10 +101,19 @@ class EnergyAccount:
     _start: float = field(default=0.0, init=False)
     _angles0: tuple = field(default=(0.0, 0.0), init=False)
     _kernel: object = field(default=None, init=False)     # the compiled law, or False without numba
+    _stage_kernel: object = field(default=None, init=False)
 
     def cage_angle(self, q: np.ndarray) -> float:
         """The kinematic cage angle [rad]: cage_0 plus eq. (16) applied to the ring angles' changes."""
         return kinematic_cage_angle(self.bearing, self.link, self._angles0, q)
+
+    def _potential(self, ex, ey, cage) -> float:
+        """The contact energy V [J] at (e, cage angle), compiled (``law_kernel.elastic_energy``) when numba is there."""
+        if self._kernel is None:
+            self._forces(ex, ey, 0.0, 0.0, cage, 0.0, 0.0)           # sets up the compiled law (or False)
+        if self._kernel:
+            return float(self._kernel[1](self._kernel[2], ex, ey, cage))
+        return self.bearing.elastic_energy(ex, ey, cage)
 
     def _forces(self, ex, ey, vx, vy, cage, wi, wo) -> tuple[float, float, float, float, float]:
         """(F_x, F_y) of the law, (F_x, F_y) at v = 0 (the elastic part) and the contact energy V [J],
@@ -91,25 +135,43 @@ class EnergyAccount:
         elastic = self.bearing.evaluate(ex, ey, 0.0, 0.0, cage, wi, wo)
         return law.F_x, law.F_y, elastic.F_x, elastic.F_y, self.bearing.elastic_energy(ex, ey, cage)
 
+    def stage_integrals(self, stages: np.ndarray, substeps: int, hs: float) -> tuple[float, float]:
+        """(D, W_cage) [J] over one integrator step from its stage states (``energy_kernel.stage_integrals``);
+        after the first ``update`` (which fixes the ring angles the kinematic cage angle starts from)."""
+        if self._stage_kernel is None:
+            from mechanism.cosim import energy_kernel, law_kernel
+            b = self.bearing
+            offset = (b.params.cage_angle_start - b.cage_velocity(self._angles0[0], self._angles0[1]))
+            self._stage_kernel = (energy_kernel.stage_integrals, law_kernel.pack_bearing(b), offset)
+        kernel, P, offset = self._stage_kernel
+        return kernel(P, stages, substeps, hs, offset)
+
     def update(self, t: float, q: np.ndarray, qd: np.ndarray, lam: np.ndarray, inputs: Sequence[float] | None = None,
-               kinetic: float | None = None) -> dict[str, float]:
+               kinetic: float | None = None, integrals: Sequence[float] | None = None) -> dict[str, float]:
         """Account up to time t [s] for the state (q, qd) and the multipliers lam of eq. (9) (model order).
 
-        ``inputs`` (the link's (e, v, omega) at (q, qd)) and ``kinetic`` (T at qd) when the caller has them."""
+        ``inputs`` (the link's (e, v, omega) at (q, qd)) and ``kinetic`` (T at qd) when the caller has them.
+        ``integrals``: (D, W_drive, W_cage, W_applied) [J] since the start, integrated by the caller's integrator
+        (the co-simulation master's RK4 stages, ``CouplingLoop``): used as they are; without them the
+        integrals are quadratures of the samples (2-step Adams-Moulton)."""
         if self._last is None:
             self._angles0 = self.link.ring_angles(q)
         ex, ey, vx, vy, wi, wo = self.link.inputs(q, qd) if inputs is None else inputs
         cage = self.cage_angle(q)
-        fx, fy, el_x, el_y, potential = self._forces(ex, ey, vx, vy, cage, wi, wo)
         system = self.system
-        powers = ((fx - el_x) * vx + (fy - el_y) * vy,                                           # damping
-                  float(np.dot(lam, system.phi_t(t))) if system.m else 0.0,                   # drivers
-                  self.bearing.cage_velocity(wi, wo) * (el_x * ey - el_y * ex),                # cage
-                  float(np.dot(system.applied_forces(q, qd, t), qd)))                          # applied
+        if integrals is not None and self._last is not None:      # only V is needed at the sample
+            powers = None
+            potential = self._potential(ex, ey, cage)
+        else:
+            fx, fy, el_x, el_y, potential = self._forces(ex, ey, vx, vy, cage, wi, wo)
+            powers = account_powers(system, self.bearing, t, q, qd, lam, (ex, ey, vx, vy, wi, wo), (fx, fy),
+                                    (el_x, el_y))
         if kinetic is None:
             kinetic = system.kinetic_energy(qd)
         if self._last is None:
             self._start = kinetic + potential
+        elif integrals is not None:
+            self._sums[:] = [float(v) for v in integrals[:4]]
         else:
             t1, p1 = self._last
             dt = t - t1

@@ -141,6 +141,14 @@ class CouplingLoop:
             self.columns += list(ENERGY_COLUMNS)
         self.n = system.n
         self.scheme = make_scheme(settings.scheme) if endpoint is not None else None
+        #: the energy account's integrals since the start [J], integrated with the RK4 stages of every accepted
+        #: step (``_integrate_energy``): D, W_drive, W_cage, W_applied, and the work of the bearing force on the
+        #: mechanism (W_link); rolled back with the step (``snapshot``/``restore``)
+        self.integrals = np.zeros(5) if energy is not None and link is not None else None
+        if self.integrals is not None:
+            self._acc = np.zeros(3)                                   # W_drive, W_applied, W_link of one step
+            self._p1 = np.zeros(3)                                    # the powers at the end state (next k1)
+            self._stages = np.zeros((5 * max(1, settings.max_substeps), 8))
         self.inputs = None
         self.force = (0.0, 0.0)
         self.mobility = 0.0
@@ -216,7 +224,8 @@ class CouplingLoop:
             fx = fy = ex = ey = 0.0
         row = self._no_row if rec is None else rec.next_row()
         self._kn.finish(y, ex, ey, fx, fy, self._I, self._R, self._L, self._LR, self._W, self._u, self._dy,
-                        self._lam, row, self._probes, self._probe_scale, t, self._cv, self._react)
+                        self._lam, row, self._probes, self._probe_scale, t, self._cv, self._react,
+                        self._p1 if self.integrals is not None else None)
         self._end = (y, t)
         if rec is None:
             return
@@ -233,7 +242,7 @@ class CouplingLoop:
                 row[rec.index[name]] = value
         if self.energy is not None and self.link is not None:
             for name, value in self.energy.update(t, y[:n], y[n:], self._lam, self._u.tolist(),
-                                                  row[rec.index["kinetic_energy"]]).items():
+                                                  row[rec.index["kinetic_energy"]], self.integrals).items():
                 row[rec.index[name]] = value
         if self.sent_ring_speeds is not None:     # the ring speeds the component was given (secant schemes)
             row[rec.index["omega_inner"]], row[rec.index["omega_outer"]] = self.sent_ring_speeds
@@ -305,8 +314,23 @@ class CouplingLoop:
         if fm is not None:     # the compiled step (kinematics of the end state included)
             if self._end[0] is not y:
                 self._end = (None, None)
-            y, drift, finite = self._kn.advance(y, t0, hs, m, t, fm, self._dy, self._k1_valid(y, t0, fm), self._I,
-                                                self._R, self._L, self._LR, self._W, self._u)
+            if self.integrals is None:
+                y, drift, finite = self._kn.advance(y, t0, hs, m, t, fm, self._dy, self._k1_valid(y, t0, fm),
+                                                    self._I, self._R, self._L, self._LR, self._W, self._u)
+            else:
+                self._acc[:] = 0.0
+                y, drift, finite = self._kn.advance(y, t0, hs, m, t, fm, self._dy, self._k1_valid(y, t0, fm),
+                                                    self._I, self._R, self._L, self._LR, self._W, self._u,
+                                                    self._acc, self._p1, self._stages)
+                if finite:
+                    self._energy_step(m, hs, finish)
+        elif self.integrals is not None and endpoint is not None:   # the NumPy reference with the account
+            y = self._advance_with_energy(y, t0, hs, m, finish)
+            finite = bool(np.all(np.isfinite(y)))
+            drift = None
+            if self.kernels:
+                self._kn.prepare(y, t, self._I, self._R, self._L, self._LR, self._W, self._u)
+                drift = self._kn.max_violation(self._I, self._W)
         else:                  # the NumPy reference (or a scheme without a force model)
             rhs = self.rhs
             for k in range(m):
@@ -344,6 +368,51 @@ class CouplingLoop:
         elif rec is not None:
             rec.add(self.row(t, y))
         return y
+
+    def _integrate_energy(self, m: int, hs: float) -> None:
+        """Add one step's integrals to ``integrals``: the mechanism's powers integrated by the RK4 stages (``_acc``)
+        and the bearing side from the stage states (``EnergyAccount.stage_integrals``)."""
+        dissipated, cage_work = self.energy.stage_integrals(self._stages, m, hs)
+        acc = self._acc
+        self.integrals += (dissipated, acc[0], cage_work, acc[1], acc[2])
+
+    def _energy_step(self, m: int, hs: float, finish: bool) -> None:
+        """After a step's integration: add its integrals now, or for a pass of an iterated step (``finish=False``)
+        when ``communicate`` has accepted it (the last pass's stages stay in ``_stages``; the others are dropped)."""
+        if finish:
+            self._integrate_energy(m, hs)
+        else:
+            self._pending_energy = (m, hs)
+
+    def _advance_with_energy(self, y: np.ndarray, t0: float, hs: float, m: int, finish: bool = True) -> np.ndarray:
+        """``m`` RK4 substeps of the NumPy reference with the energy account: the mechanism's powers (drivers
+        lambda . Phi_t, applied Q^A . q', the bearing force Q_link . q') as three more states of the same RK4
+        step, and the stage states recorded for the bearing side, as ``kernels.advance`` does."""
+        system, link, scheme, n = self.system, self.link, self.scheme, self.n
+        stages = []
+
+        def rhs(tau, ya):
+            q, qd = ya[:n], ya[n:2 * n]
+            Q = system.applied_forces(q, qd, tau)
+            applied = float(np.dot(Q, qd))
+            ex, ey, vx, vy, wi, wo = link.inputs(q, qd)
+            Fx, Fy = scheme.force(tau, ex, ey, vx, vy)
+            link.generalized_force(q, ex, ey, Fx, Fy, Q)
+            qdd, lam = system.accelerations(q, qd, tau, Q)
+            drive = float(np.dot(lam, system.phi_t(tau))) if system.m else 0.0
+            stages.append((ex, ey, vx, vy, wi, wo, *link.ring_angles(q)))
+            return np.concatenate((qd, qdd, (drive, applied, float(np.dot(Q, qd)) - applied)))
+
+        ya = np.concatenate((y, np.zeros(3)))
+        for k in range(m):
+            ya = rk4_step(rhs, t0 + k * hs, ya, hs)
+            q, qd = ya[:n], ya[n:2 * n]
+            stages.append((*link.inputs(q, qd), *link.ring_angles(q)))
+        self._stages[:5 * m] = stages
+        self._acc[:] = ya[2 * n:]
+        if np.all(np.isfinite(ya)):
+            self._energy_step(m, hs, finish)
+        return ya[:2 * n]
 
     def communicate(self, y: np.ndarray, t0: float, h: float, step: int, t: float | None = None,
                     rec: Recorder | None = None) -> np.ndarray:
@@ -387,6 +456,8 @@ class CouplingLoop:
         finally:
             scheme.set_trial(None)
             self.release(snap)
+        if self.integrals is not None:                # the accepted pass's energy integrals
+            self._integrate_energy(*self._pending_energy)
         stats["steps"] += 1
         stats["passes"] += passes
         stats["max_passes"] = max(stats["max_passes"], passes)
@@ -456,7 +527,7 @@ class CouplingLoop:
         row["constraint_violation"] = float(np.max(np.abs(system.phi(q, t)))) if system.m else 0.0
         row["kinetic_energy"] = system.kinetic_energy(qd)
         if self.energy is not None:
-            row.update(self.energy.update(t, q, qd, lam, self.inputs, row["kinetic_energy"]))
+            row.update(self.energy.update(t, q, qd, lam, self.inputs, row["kinetic_energy"], self.integrals))
         if self.sent_ring_speeds is not None:     # the ring speeds the component was given (secant schemes)
             row["omega_inner"], row["omega_outer"] = self.sent_ring_speeds
         return row
@@ -466,11 +537,14 @@ class CouplingLoop:
         endpoint = self.endpoint
         fmu_state = endpoint.get_state() if endpoint is not None else None
         past = tuple(self.scheme.past) if self.scheme is not None else ()
-        return past, self.inputs, self.force, fmu_state
+        integrals = self.integrals.copy() if self.integrals is not None else None
+        return past, self.inputs, self.force, fmu_state, integrals
 
     def restore(self, snap) -> None:
         """Roll back to ``snap`` (which stays valid for another restore)."""
-        past, self.inputs, self.force, fmu_state = snap
+        past, self.inputs, self.force, fmu_state, integrals = snap
+        if integrals is not None:
+            self.integrals[:] = integrals
         if self.scheme is not None:
             self.scheme.past.clear()
             self.scheme.past.extend(past)
@@ -545,6 +619,18 @@ def finish(rec: Recorder, info: dict, status: str, message: str, endpoint, bar, 
     bar.close()
     info["substeps_max"] = loop.substeps_max
     info["substeps_total"] = loop.substeps_total
+    if loop.integrals is not None and status == "completed" and len(rec.table()) > 1:
+        # the energy residual's two parts [J]: the mechanism's (T - T_0 - W_drive - W_applied - W_link, the RK4
+        # integration's error) and the interface's (W_link + V - V_0 + D - W_cage: the work of the bearing
+        # force the mechanism felt against what the law stores and dissipates along the trajectory, i.e. the
+        # energy the coupling created)
+        table = rec.table()
+        kinetic = table[:, rec.index["kinetic_energy"]]
+        drive, applied, link_work = loop.integrals[1], loop.integrals[3], loop.integrals[4]
+        mechanism = float(kinetic[-1] - kinetic[0] - drive - applied - link_work)
+        info["energy_interface_work_J"] = float(link_work)
+        info["energy_residual_mechanism_J"] = mechanism
+        info["energy_residual_coupling_J"] = float(table[-1, rec.index["energy_residual"]]) - mechanism
     it = loop.iterations
     if it["steps"]:
         info.update(iteration_passes_mean=it["passes"] / it["steps"], iteration_passes_max=it["max_passes"],

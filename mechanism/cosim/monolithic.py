@@ -7,6 +7,14 @@ steps) makes this the reference that co-simulation error is measured against.
 
 The integrator is stepped by hand (``OdeSolver.step``) and sampled through its dense output
 at the output grid, so a failure keeps what was computed up to it.
+
+Energy account (issue 12): the account's integrals (damping dissipation D, work of the drivers, of the cage
+and of the applied forces; ``mechanism.cosim.energy``) are four more states of the ODE, y = [q, q', cage, D,
+W_drive, W_cage, W_applied], whose derivatives are the powers ``energy.account_powers`` at the same state
+(no feedback into the motion). The integrator's error control covers them, and with the contact onsets
+located as events no step straddles the jump of the damping power C v_r^2 at an onset: the account's
+residual R = T + V + D - W_drive - W_applied - W_cage - T_0 - V_0 is then the integrator's error, not a
+quadrature floor of the samples (``energy_states=False``: the sampled account of ``EnergyAccount``).
 """
 from __future__ import annotations
 
@@ -17,7 +25,7 @@ from tqdm import tqdm
 
 from fmu_bearing.ball_bearing import BallBearing
 from mechanism.cosim.coupling.implicit import ball_deflections
-from mechanism.cosim.energy import ENERGY_COLUMNS, EnergyAccount
+from mechanism.cosim.energy import ENERGY_COLUMNS, EnergyAccount, account_powers
 from mechanism.cosim.joint import BearingLink
 from mechanism.cosim.master import Observer
 from mechanism.cosim.record import BASE_COLUMNS, Recorder, RunResult
@@ -36,15 +44,22 @@ def tolerances(system: System, rtol: float) -> np.ndarray:
     return np.concatenate((np.full(n, 1e-12), np.full(n, 1e-9), [1e-10])) * max(rtol / 1e-9, 1e-3)
 
 
+#: absolute tolerance [J] at rtol 1e-9 of the energy account's quadrature states (scaled with rtol as the
+#: others): the dissipation over a run is ~1e-4 ... 1e-2 J, the drive work ~0.1 J
+ENERGY_ATOL = 1e-10
+
+
 def run_monolithic(system: System, link: BearingLink, bearing: BallBearing, q0: np.ndarray, qd0: np.ndarray,
                    t_end: float, output_interval: float, observe: Observer, method: str = "LSODA",
                    rtol: float = 1e-9, progress: bool = True, meta: dict | None = None,
-                   events: bool = True) -> RunResult:
+                   events: bool = True, energy_states: bool = True) -> RunResult:
     """Integrate the coupled ODE to ``t_end`` and sample it every ``output_interval`` (SI).
 
     ``events``: locate every ball's entry into and exit from the load zone (delta_r = 0, eq. 18) on the
     dense output (Brent's method to 1e-14 s) and restart the integrator there, so that no step straddles
     the jump of the damping force C v_r at a contact onset (meta ``contact_events``).
+    ``energy_states``: integrate the energy account's integrals as ODE states (module docstring); False: the
+    sampled account (quadrature of the samples, ``EnergyAccount``).
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
@@ -69,9 +84,14 @@ def run_monolithic(system: System, link: BearingLink, bearing: BallBearing, q0: 
     def rhs(t, y):
         counter["rhs"] += 1
         q, qd, cage = y[:n], y[n:2 * n], y[2 * n]
-        Q, _, u = forces(t, q, qd, cage)
-        qdd = system.accelerations(q, qd, t, Q)[0]
-        return np.concatenate((qd, qdd, [bearing.cage_velocity(u[4], u[5])]))          # eq. (9), (16)
+        Q, f, u = forces(t, q, qd, cage)
+        qdd, lam = system.accelerations(q, qd, t, Q)
+        head = (qd, qdd, [bearing.cage_velocity(u[4], u[5])])                              # eq. (9), (16)
+        if not energy_states:
+            return np.concatenate(head)
+        el = bearing.evaluate(u[0], u[1], 0.0, 0.0, cage, u[4], u[5])
+        return np.concatenate(head + (account_powers(system, bearing, t, q, qd, lam, u, (f.F_x, f.F_y),
+                                                     (el.F_x, el.F_y)),))
 
     def record(t, y):
         q, qd, cage = y[:n], y[n:2 * n], float(y[2 * n])
@@ -83,19 +103,35 @@ def run_monolithic(system: System, link: BearingLink, bearing: BallBearing, q0: 
                    constraint_violation=float(np.max(np.abs(system.phi(q, t)))),
                    kinetic_energy=system.kinetic_energy(qd))
         row.update({f"ball_load_{r + 1}": loads[r] for r in range(nb)})
-        row.update(energy.update(t, q, qd, lam, (ex, ey, vx, vy, wi, wo), row["kinetic_energy"]))
+        if energy_states:
+            dissipated, drive, cage_work, applied = (float(v) for v in y[2 * n + 1:2 * n + 5])
+            potential = bearing.elastic_energy(ex, ey, cage)
+            total = row["kinetic_energy"] + potential
+            if not start_energy:
+                start_energy.append(total)
+            row.update(contact_energy=potential, damping_dissipation=dissipated, drive_work=drive,
+                       cage_work=cage_work, applied_work=applied,
+                       energy_residual=total + dissipated - drive - applied - cage_work - start_energy[0])
+        else:
+            row.update(energy.update(t, q, qd, lam, (ex, ey, vx, vy, wi, wo), row["kinetic_energy"]))
         rec.add(row)
 
-    y0 = np.concatenate((q0, qd0, [bearing.params.cage_angle_start])).astype(float)
+    start_energy: list = []
+    y0 = np.concatenate((q0, qd0, [bearing.params.cage_angle_start], [0.0] * (4 if energy_states else 0)))
+    y0 = y0.astype(float)
     info = dict(meta or {})
     info.update(method=method, rtol=rtol, t_end_s=float(times[-1]), output_interval_s=output_interval,
-                endpoint="monolithic", scheme="none")
+                endpoint="monolithic", scheme="none",
+                energy_account="ode-states" if energy_states else "sampled")
     bar = tqdm(total=100, desc=f"monolithic ({method})", unit="%", disable=not progress, leave=False,
                mininterval=0.5)
     k = 0
     try:
         def start(t0, y, first_step=None):
-            return METHODS[method](rhs, t0, y, float(times[-1]), rtol=rtol, atol=tolerances(system, rtol),
+            atol = tolerances(system, rtol)
+            if energy_states:
+                atol = np.concatenate((atol, np.full(4, ENERGY_ATOL * max(rtol / 1e-9, 1e-3))))
+            return METHODS[method](rhs, t0, y, float(times[-1]), rtol=rtol, atol=atol,
                                    max_step=output_interval * 10, first_step=first_step)
 
         def zone(y):

@@ -407,7 +407,39 @@ def rhs(tau, y, fm, I, R, L, LR, W, u, dy):
 
 
 @njit(cache=True)
-def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u):
+def powers(y, I, R, W):
+    """The powers [W] at the state y whose right-hand side was just evaluated (kinematics, lambda and Q in W):
+    of the drivers lambda . Phi_t (the rheonomic constraints' work, e.g. the crank's M omega), of the applied
+    forces Q^A . q' and of the force joint Q_link . q' (Q minus Q^A: the bearing force's work on the mechanism).
+    With the velocity constraints met, dT/dt is their sum (eq. 4, 7, 9); the energy account integrates them
+    with the RK4 stages (``advance``)."""
+    n, m, K, A = I[1], I[2], I[3], I[4]
+    ol = m * n + 3 * m                     # lambda, Phi_t and Q in W (the layout of _slices)
+    oq = m * n + 5 * m + m * m
+    drive = 0.0
+    for r in range(m):
+        drive += W[ol + r] * W[ol + m + r]
+    o = H_R + 7 * K + 2 * A + n
+    app = 0.0
+    total = 0.0
+    for i in range(n):
+        app += R[o + i] * y[n + i]
+        total += W[oq + i] * y[n + i]
+    return drive, app, total - app
+
+
+@njit(cache=True)
+def _stage_row(stages, row, y, u, nb, L):
+    """The energy account's record of a stage state: its bearing inputs u and the ring angles (journal, housing)."""
+    n = y.shape[0] // 2
+    for i in range(6):
+        stages[row, i] = u[i]
+    stages[row, 6] = y[3 * L[2] + 2] if L[2] < nb else 0.0
+    stages[row, 7] = y[3 * L[1] + 2] if L[1] < nb else 0.0
+
+
+@njit(cache=True)
+def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc=None, p1=None, stages=None):
     """``substeps`` RK4 steps of size hs from (t0, y) under the force model fm; returns the new state
     its constraint violation max |Phi| (one kinematics evaluation per state) and whether it is finite.
 
@@ -415,6 +447,12 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u):
     On return W holds the kinematics of the end state at t_end (= t0 + substeps * hs, as the caller
     counts time) (for ``max_violation``
     and ``finish``) and u its bearing inputs. Same arithmetic as ``integrators.rk4_step``.
+
+    Energy account (all three given, else skipped): ``acc`` (3) += the integrals over the step of the
+    ``powers`` (drivers, applied, force joint) by the RK4 stages' own weights (the quadrature that RK4 applies
+    to a state whose derivative they are); ``p1``: the powers at (t0, y) when ``k1_valid`` (from ``finish``);
+    ``stages`` (5 substeps x 8): per substep, rows of its four stage states and its end state (``_stage_row``),
+    for the bearing side of the account (``mechanism.cosim.energy``).
     """
     N = y.shape[0]
     n = N // 2
@@ -425,24 +463,51 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u):
     yt = np.empty(N)
     y = y.copy()
     h2 = 0.5 * hs
+    account = acc is not None and p1 is not None and stages is not None
+    nb = I[0]
+    a1 = b1 = c1 = a2 = b2 = c2 = a3 = b3 = c3 = a4 = b4 = c4 = 0.0
     for sub in range(substeps):
         t = t0 + sub * hs
         if sub > 0 or not k1_valid:
             rhs(t, y, fm, I, R, L, LR, W, u, kk)
+            if account:
+                a1, b1, c1 = powers(y, I, R, W)
         else:
             kk[:] = k1
+            if account:
+                a1, b1, c1 = p1[0], p1[1], p1[2]
+                if L[0] == 1:
+                    link_inputs(y[:n], y[n:], nb, L, LR, u)
+        if account:
+            _stage_row(stages, 5 * sub, y, u, nb, L)
         for i in range(N):
             yt[i] = y[i] + h2 * kk[i]
         rhs(t + h2, yt, fm, I, R, L, LR, W, u, k2)
+        if account:
+            a2, b2, c2 = powers(yt, I, R, W)
+            _stage_row(stages, 5 * sub + 1, yt, u, nb, L)
         for i in range(N):
             yt[i] = y[i] + h2 * k2[i]
         rhs(t + h2, yt, fm, I, R, L, LR, W, u, k3)
+        if account:
+            a3, b3, c3 = powers(yt, I, R, W)
+            _stage_row(stages, 5 * sub + 2, yt, u, nb, L)
         for i in range(N):
             yt[i] = y[i] + hs * k3[i]
         rhs(t + hs, yt, fm, I, R, L, LR, W, u, k4)
+        if account:
+            a4, b4, c4 = powers(yt, I, R, W)
+            _stage_row(stages, 5 * sub + 3, yt, u, nb, L)
         c = hs / 6.0
         for i in range(N):
             y[i] = y[i] + c * (kk[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
+        if account:
+            acc[0] += c * (a1 + 2.0 * (a2 + a3) + a4)
+            acc[1] += c * (b1 + 2.0 * (b2 + b3) + b4)
+            acc[2] += c * (c1 + 2.0 * (c2 + c3) + c4)
+            if L[0] == 1:
+                link_inputs(y[:n], y[n:], nb, L, LR, u)
+            _stage_row(stages, 5 * sub + 4, y, u, nb, L)
     finite = True
     for i in range(N):
         if not math.isfinite(y[i]):
@@ -465,14 +530,15 @@ def prepare(y, t, I, R, L, LR, W, u):
 
 
 @njit(cache=True)
-def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t, cv, react):
+def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t, cv, react, p1=None):
     """dy/dt = [qd, qdd] and lambda (model order) at the end state y whose kinematics ``advance``
     (or ``prepare``) left in W (and its bearing inputs in u), with the exchanged force (fx, fy) at
     inputs e. This is the recorded
     sample and the next step's first RK4 stage. If ``row`` is not empty the sample's probes are
     written into it (``fill_row``); with ``react`` = [first row, end row, x column, y column] of a
     kinematic joint (model order) and no force joint, the force written is that joint's reaction
-    Q^C = -Phi_q^T lambda (eq. 7) on those coordinates (the ideal joint's force on the housing body)."""
+    Q^C = -Phi_q^T lambda (eq. 7) on those coordinates (the ideal joint's force on the housing body).
+    ``p1`` (energy account), if given, receives the ``powers`` there (the next step's first stage)."""
     n = I[1]
     q, qd = y[:n], y[n:]
     Q = _slices(I, W)[7]
@@ -482,6 +548,8 @@ def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t,
     dy[:n] = qd
     solve(qd, Q, I, R, W, dy[n:])
     multipliers(I, W, lam)
+    if p1 is not None:
+        p1[0], p1[1], p1[2] = powers(y, I, R, W)
     if row.shape[0] > 0 and L[0] == 0 and react.shape[0] == 4:
         m, K, A = I[2], I[3], I[4]
         to_model = I[H_I + 3 * K + 2 * A:H_I + 3 * K + 2 * A + m]

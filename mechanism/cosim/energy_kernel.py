@@ -1,0 +1,103 @@
+"""The bearing side of the energy account over a communication step, from the integrator's stages (numba).
+
+The master's RK4 step records, per substep, its four stage states and its end state (bearing inputs and ring
+angles; ``mechanism.multibody.kernels.advance`` or the NumPy path of ``master.CouplingLoop.advance``). Here the
+force law's damping power (F - F_el) . v and cage power omega_m (F_el x e)_z (``energy.account_powers``) are
+evaluated at those states, per ball, and integrated with the stages' own weights h/6 (1, 2, 2, 1): the
+quadrature RK4 applies to a state whose derivative they are (4th order where the powers are smooth).
+
+Contact onsets: with the paper's constant damping a ball entering the load zone switches its damping power
+C v_r^2 on at once (eq. 18), a jump that a quadrature over the stages straddles with an O(h) error. For a ball
+whose deflection delta_r = e . u_r - P_d/2 changes sign over a substep, the onset's position theta in the
+substep is located by linear interpolation of delta_r between the substep's ends, and that ball's share is the
+integral over its loaded part of the quadratic through its loaded-formula power (C v_r^2, clamped as the law
+does) at the substep's start, middle (mean of the two midpoint stages) and end: O(h^2) in the onset's position
+instead of O(h) per onset. The oil-film damping vanishes with the load (no jump) and is integrated as it is.
+
+A second implementation of the law's per-ball arithmetic (``fmu_bearing.ball_bearing.BallBearing.evaluate``,
+compiled as ``law_kernel.evaluate`` with the same parameter array ``law_kernel.pack_bearing``); the account's
+tests hold it against ``energy.account_powers`` (tests/test_energy.py).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from fmu_bearing.ball_bearing import FILM_SPEED_EXPONENT
+from fmu_bearing.parameters import DAMPING_CONSTANT, DAMPING_OIL_FILM
+from mechanism.cosim.law_kernel import HEADER, _oil_film
+
+#: the RK4 weights of the four stages (times h/6)
+_WEIGHTS = (1.0, 2.0, 2.0, 1.0)
+
+
+@njit(cache=True)
+def stage_integrals(P, stages, substeps, hs, cage_offset):
+    """(D, W_cage) [J] over ``substeps`` substeps of size hs [s] from the rows of ``stages`` (5 per substep:
+    e_x, e_y, v_x, v_y, omega_inner, omega_outer, journal angle, housing angle). ``cage_offset``: the kinematic
+    cage angle is cage_offset + w_inner * journal angle + w_outer * housing angle (eq. 16 integrated)."""
+    nb = int(P[0])
+    K, half = P[1], P[2]
+    model = int(P[3])
+    constant = model == DAMPING_CONSTANT
+    oil = model == DAMPING_OIL_FILM
+    w_in, w_out = P[11], P[12]
+    pd = np.zeros((5, nb))        # the law's damping power per ball
+    pt = np.zeros((5, nb))        # the loaded formula's (constant damping), whatever the sign of delta
+    dl = np.zeros((5, nb))        # delta
+    D = 0.0
+    Wc = 0.0
+    c6 = hs / 6.0
+    for sub in range(substeps):
+        for j in range(5):
+            row = 5 * sub + j
+            e_x, e_y, v_x, v_y = stages[row, 0], stages[row, 1], stages[row, 2], stages[row, 3]
+            wi, wo = stages[row, 4], stages[row, 5]
+            cage = cage_offset + w_in * stages[row, 6] + w_out * stages[row, 7]
+            c, s = math.cos(cage), math.sin(cage)
+            ex, ey = c * e_x + s * e_y, c * e_y - s * e_x
+            vx, vy = c * v_x + s * v_y, c * v_y - s * v_x
+            speed = (P[5] * abs(wi - wo)) ** FILM_SPEED_EXPONENT if oil else 0.0
+            cage_power = 0.0
+            for r in range(nb):
+                cr, sr = P[HEADER + r], P[HEADER + nb + r]
+                delta = ex * cr + ey * sr - half
+                vr = vx * cr + vy * sr
+                dl[j, r] = delta
+                w = K * delta * math.sqrt(delta) if delta > 0.0 else 0.0
+                if constant:
+                    f = w + P[4] * vr
+                    pt[j, r] = ((f if f > 0.0 else 0.0) - w) * vr
+                if delta > 0.0:
+                    if constant:
+                        C = P[4]
+                    elif oil:
+                        C = _oil_film(P, w, speed)[0]
+                    else:
+                        C = 0.0
+                    f = w + C * vr
+                    pd[j, r] = ((f if f > 0.0 else 0.0) - w) * vr
+                    cage_power += w * (cr * ey - sr * ex)
+                else:
+                    pd[j, r] = 0.0
+            if j < 4:
+                wt = c6 * _WEIGHTS[j]
+                for r in range(nb):
+                    D += wt * pd[j, r]
+                Wc += wt * (w_in * wi + w_out * wo) * cage_power
+        if constant:
+            for r in range(nb):
+                d0, d1 = dl[0, r], dl[4, r]
+                if (d0 > 0.0) == (d1 > 0.0):
+                    continue
+                # an onset or release inside the substep: this ball's share, over its loaded part only
+                D -= c6 * (pd[0, r] + 2.0 * (pd[1, r] + pd[2, r]) + pd[3, r])
+                theta = d0 / (d0 - d1)
+                a, b = (theta, 1.0) if d1 > 0.0 else (0.0, theta)
+                p0, pm, p1 = pt[0, r], 0.5 * (pt[1, r] + pt[2, r]), pt[4, r]
+                b1 = -3.0 * p0 + 4.0 * pm - p1
+                b2 = 2.0 * p0 - 4.0 * pm + 2.0 * p1
+                D += hs * (p0 * (b - a) + 0.5 * b1 * (b * b - a * a) + b2 * (b * b * b - a * a * a) / 3.0)
+    return D, Wc
