@@ -6,6 +6,7 @@ import os
 import signal
 import sys
 import threading
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -92,15 +93,15 @@ def cmd_run(args) -> int:
     out = Path(args.out)
     check_output_folder(out)
     config = config_from_ssp_args(args) if args.ssp else config_from_args(args)
-    with output_lock(out):
+    with output_lock(out), output_workers(not args.no_plots) as workers:
         result = run(config)
         stopped = interrupted()
         ideal = None
         if not stopped and config.joint != "ideal" and not args.no_ideal:
-            ideal = ideal_counterpart(config, result)
+            ideal = ideal_counterpart(config, result, workers)
             stopped = interrupted()
         with stop_on_signals():   # a signal while writing waits until the files are complete
-            figures = write_outputs(result, out, ideal, plots=not args.no_plots and not stopped)
+            figures = write_outputs(result, out, ideal, plots=not args.no_plots and not stopped, workers=workers)
     files = "timeseries.csv" + (", ideal_timeseries.csv" if ideal is not None else "") + ", summary.json"
     print(f"wrote {out}/{files}" + (f" and {len(figures['plots'])} plots" if figures["plots"] else ""))
     label, part = ("second revolution", figures["rev2"]) if "rev2" in figures else ("whole run", figures.get("all"))
@@ -121,11 +122,26 @@ def cmd_run(args) -> int:
     return 0
 
 
-def ideal_counterpart(config: "RunConfig", result):
+@contextmanager
+def output_workers(plots: bool):
+    """``mechanism.output.workers.OutputWorkers`` for a run that plots (they import matplotlib and scipy while
+    the run runs), None otherwise or where they are disabled."""
+    from mechanism.output import workers
+    n = workers.count() if plots else 0
+    if not n:
+        yield None
+        return
+    with workers.OutputWorkers(n) as started:
+        yield started
+
+
+def ideal_counterpart(config: "RunConfig", result, workers=None):
     """The ideal joint's run for comparison, at the cheapest step that keeps its documented agreement
     (``IDEAL_STEP``: RK4 at 1e-4 s matches 1e-5 s to < 1e-9, mechanism.studies.reproduce.cases), resampled
     by cubic splines onto the bearing run's sample times when those are finer (error < 1e-9 relative
-    for these smooth signals; measured in tests/test_kernels.py)."""
+    for these smooth signals; measured in tests/test_kernels.py). ``workers``: the resampling runs in the
+    first output worker, which imported scipy.interpolate while the run ran (the same function, the same
+    numbers)."""
     from dataclasses import replace
 
     from mechanism.cosim.record import resample
@@ -135,7 +151,7 @@ def ideal_counterpart(config: "RunConfig", result):
     ideal = run(replace(config, joint="ideal", mode="cosim", settings={}, balls=None, step=step, record_every=None,
                         output_interval=max(step, config.output_interval)))
     if ideal.ok and len(ideal.data) > 1 and ideal.meta.get("output_interval_s") != result.meta.get("output_interval_s"):
-        ideal = resample(ideal, result["time"])
+        ideal = workers.call(0, "resample", ideal, result["time"]) if workers else resample(ideal, result["time"])
     return ideal
 
 
