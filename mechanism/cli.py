@@ -6,6 +6,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -86,22 +87,35 @@ def check_output_folder(out: Path) -> None:
 EXIT_INTERRUPTED = 130
 
 
+#: wall seconds of the last ``cmd_run``'s phases: imports (of the run's modules), run (the master, with the
+#: compiled kernels' and the FMU's loading), ideal (the counterpart), outputs (CSV, summary, plots);
+#: benchmarks/cosim.py prints them
+PHASES: dict[str, float] = {}
+
+
 def cmd_run(args) -> int:
+    start = time.perf_counter()
     from mechanism.output.results import output_lock, write_outputs
     from mechanism.run import interrupted, run, stop_on_signals
     from mechanism.ssp.config import config_from_ssp_args
     out = Path(args.out)
     check_output_folder(out)
     config = config_from_ssp_args(args) if args.ssp else config_from_args(args)
+    PHASES.clear()
     with output_lock(out), output_workers(not args.no_plots) as workers:
+        marks = [start, time.perf_counter()]
         result = run(config)
+        marks.append(time.perf_counter())
         stopped = interrupted()
         ideal = None
         if not stopped and config.joint != "ideal" and not args.no_ideal:
             ideal = ideal_counterpart(config, result, workers)
             stopped = interrupted()
+        marks.append(time.perf_counter())
         with stop_on_signals():   # a signal while writing waits until the files are complete
             figures = write_outputs(result, out, ideal, plots=not args.no_plots and not stopped, workers=workers)
+        marks.append(time.perf_counter())
+    PHASES.update(zip(("imports", "run", "ideal", "outputs"), (b - a for a, b in zip(marks, marks[1:]))))
     files = "timeseries.csv" + (", ideal_timeseries.csv" if ideal is not None else "") + ", summary.json"
     print(f"wrote {out}/{files}" + (f" and {len(figures['plots'])} plots" if figures["plots"] else ""))
     label, part = ("second revolution", figures["rev2"]) if "rev2" in figures else ("whole run", figures.get("all"))

@@ -16,11 +16,15 @@ in-process.
 """
 from __future__ import annotations
 
+import contextlib
 import importlib
-import multiprocessing
 import os
 import signal
+import socket
+import subprocess
+import sys
 from contextlib import contextmanager
+from multiprocessing.connection import Connection
 
 #: the figures each of two workers draws: about equal drawing times (a 2-revolution run with its ideal
 #: counterpart: slider acceleration 0.48 s, ball loads 0.41, eccentricity 0.13 against 0.21 + 0.38 + 0.18 +
@@ -53,9 +57,11 @@ def _resample(*args):
 JOBS = {"plots": _plots, "resample": _resample}
 
 
-def _serve(conn, modules) -> None:
-    """A worker: import ``modules``, then answer ``(job, args, kwargs)`` with ``("ok", value)`` or
-    ``("error", exception)`` until ``None`` or the end of the pipe."""
+def serve(fd: int, modules) -> None:
+    """A worker (``python -c``, started by ``OutputWorkers``): import ``modules``, then answer each
+    ``(job, args, kwargs)`` received on the socket ``fd`` with ``("ok", value)`` or ``("error", exception)``
+    until ``None`` or the end of the connection."""
+    conn = Connection(fd)
     for name in modules:
         try:
             importlib.import_module(name)
@@ -91,28 +97,34 @@ def count() -> int:
         raise ValueError(f"MECHANISM_OUTPUT_WORKERS={text!r} must be 0, 1 or 2") from None
     if not 0 <= n <= 2:
         raise ValueError(f"MECHANISM_OUTPUT_WORKERS={text!r} must be 0, 1 or 2")
-    return n if (os.cpu_count() or 1) >= 2 else 0
+    return n if (os.cpu_count() or 1) >= 2 and os.name == "posix" else 0   # pass_fds: POSIX
 
 
 class OutputWorkers:
-    """Processes (spawned: a fresh interpreter, nothing of the run's FMU or compiled kernels inherited) that run
-    ``JOBS``; ``submit`` hands one a job, ``result`` waits for its answer. Use as a context manager."""
+    """Worker processes (a fresh interpreter each: nothing of the run's FMU or compiled kernels inherited) that
+    run ``JOBS``; ``submit`` hands one a job, ``result`` waits for its answer. Use as a context manager.
+
+    A worker is ``python -c`` with this interpreter and ``sys.path`` and one end of a socket pair (pickled
+    messages, ``multiprocessing.connection.Connection``): no multiprocessing start method, so no resource
+    tracker or other helper process is left behind."""
 
     def __init__(self, n: int = 1):
         self._procs, self._conns, self._busy = [], [], []
-        ctx = multiprocessing.get_context("spawn")
         with _sigint_ignored():   # inherited: a Ctrl-C in the terminal goes to the command alone
             for modules in (IMPORTS, *[IMPORTS_OTHERS] * (n - 1)):
+                conn = proc = None
                 try:
-                    parent, child = ctx.Pipe()
-                    proc = ctx.Process(target=_serve, args=(child, modules), daemon=True,
-                                       name="mechanism-output")
-                    proc.start()
-                    child.close()
-                except (OSError, RuntimeError):   # cannot start a process: the jobs run in-process
-                    parent = proc = None
+                    ours, theirs = socket.socketpair()
+                    with theirs:
+                        code = (f"import sys; sys.path[:] = {sys.path!r}; from mechanism.output.workers import serve; "
+                                f"serve({theirs.fileno()}, {modules!r})")
+                        proc = subprocess.Popen([sys.executable, "-c", code], pass_fds=(theirs.fileno(),),
+                                                stdin=subprocess.DEVNULL)
+                    conn = Connection(ours.detach())
+                except (OSError, ValueError):   # cannot start a process: its jobs run in-process
+                    pass
                 self._procs.append(proc)
-                self._conns.append(parent)
+                self._conns.append(conn)
                 self._busy.append(False)
 
     def __len__(self) -> int:
@@ -157,7 +169,8 @@ class OutputWorkers:
         if conn is not None:
             conn.close()
         if proc is not None:
-            proc.join(timeout=1.0)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(timeout=1.0)
 
     def close(self) -> None:
         """End every worker: one that answered its jobs is idle (or still importing) and writes nothing, so
@@ -174,9 +187,13 @@ class OutputWorkers:
                 conn.send(None)
             except (OSError, ValueError):
                 pass
-            if proc.is_alive():
+            if proc.poll() is None:
                 proc.terminate()
-            proc.join(timeout=5.0)
+            try:
+                proc.wait(timeout=5.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
             conn.close()
             self._procs[k] = self._conns[k] = None
 
