@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import signal
 import sys
@@ -115,7 +116,7 @@ def cmd_run(args) -> int:
         with stop_on_signals():   # a signal while writing waits until the files are complete
             figures = write_outputs(result, out, ideal, plots=not args.no_plots and not stopped, workers=workers)
         marks.append(time.perf_counter())
-    PHASES.update(zip(("imports", "run", "ideal", "outputs"), (b - a for a, b in zip(marks, marks[1:]))))
+    PHASES.update(zip(("imports", "run", "ideal", "outputs"), (b - a for a, b in itertools.pairwise(marks))))
     files = "timeseries.csv" + (", ideal_timeseries.csv" if ideal is not None else "") + ", summary.json"
     print(f"wrote {out}/{files}" + (f" and {len(figures['plots'])} plots" if figures["plots"] else ""))
     label, part = ("second revolution", figures["rev2"]) if "rev2" in figures else ("whole run", figures.get("all"))

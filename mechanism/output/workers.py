@@ -27,10 +27,10 @@ from contextlib import contextmanager
 from multiprocessing.connection import Connection
 
 #: the figures each of two workers draws: about equal drawing times (a 2-revolution run with its ideal
-#: counterpart: slider acceleration 0.48 s, ball loads 0.41, eccentricity 0.13 against 0.21 + 0.38 + 0.18 +
-#: 0.24 s); one worker draws them all
-SHARES = (("slider_acceleration.png", "ball_loads.png", "eccentricity.png"),
-          ("crank_moment.png", "joint_force.png", "energy.png", "slider_position_error.png"))
+#: counterpart, best of 3: joint force 0.45 s, slider acceleration 0.22, energy 0.17, eccentricity 0.10 against
+#: ball loads 0.45, slider position error 0.21, crank moment 0.20); one worker draws them all
+SHARES = (("joint_force.png", "slider_acceleration.png", "energy.png", "eccentricity.png"),
+          ("ball_loads.png", "slider_position_error.png", "crank_moment.png"))
 
 #: modules a worker imports while it waits for its first job (the first also resamples)
 IMPORTS = ("mechanism.output.plots", "mechanism.cosim.record", "scipy.interpolate")
@@ -88,8 +88,9 @@ def serve(fd: int, modules) -> None:
 def count() -> int:
     """How many workers a plotting run starts: ``MECHANISM_OUTPUT_WORKERS`` (default 1, at most 2; 0 draws
     in-process), none on a single-CPU machine (nothing would run beside the master). One worker moves the
-    imports and the drawing off the command's path at the cost of one more interpreter (≈ 0.3 s of CPU); two
-    also halve the drawing but import matplotlib twice, which only pays on an otherwise idle second core."""
+    imports and the drawing off the command's path at the cost of one more interpreter (0.3-0.7 s of CPU,
+    docs/kernels.md); two also halve the drawing but import matplotlib twice, which only pays on an otherwise
+    idle second core (measured slower under load)."""
     text = os.environ.get("MECHANISM_OUTPUT_WORKERS", "1").strip()
     try:
         n = int(text)
@@ -115,14 +116,18 @@ class OutputWorkers:
                 conn = proc = None
                 try:
                     ours, theirs = socket.socketpair()
-                    with theirs:
-                        code = (f"import sys; sys.path[:] = {sys.path!r}; from mechanism.output.workers import serve; "
-                                f"serve({theirs.fileno()}, {modules!r})")
-                        proc = subprocess.Popen([sys.executable, "-c", code], pass_fds=(theirs.fileno(),),
-                                                stdin=subprocess.DEVNULL)
-                    conn = Connection(ours.detach())
-                except (OSError, ValueError):   # cannot start a process: its jobs run in-process
-                    pass
+                except OSError:
+                    ours = theirs = None
+                try:
+                    if theirs is not None:
+                        with theirs:
+                            code = (f"import sys; sys.path[:] = {sys.path!r}; "
+                                    f"from mechanism.output.workers import serve; serve({theirs.fileno()}, {modules!r})")
+                            proc = subprocess.Popen([sys.executable, "-c", code], pass_fds=(theirs.fileno(),),
+                                                    stdin=subprocess.DEVNULL)
+                        conn = Connection(ours.detach())
+                except (OSError, ValueError, TypeError):   # cannot start one (no sys.executable): jobs run here
+                    ours.close()
                 self._procs.append(proc)
                 self._conns.append(conn)
                 self._busy.append(False)
@@ -139,6 +144,8 @@ class OutputWorkers:
             conn.send((job, args, kwargs))
         except (OSError, ValueError):   # it died (a broken pipe)
             self._lost(k)
+            return False
+        except Exception:   # noqa: BLE001 - the job does not pickle (nothing was sent): it runs in-process
             return False
         self._busy[k] = True
         return True
