@@ -188,8 +188,9 @@ DESCRIPTION = ("Co-simulate the slider-crank of Xu et al. (2012) with its crank-
                "(also installed as bearing-cosim). 'python -m mechanism SUBCOMMAND --help' describes each.")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The parser with every subcommand (each package's ``register`` adds its own)."""
+def build_parser(studies: bool = True) -> argparse.ArgumentParser:
+    """The parser with every subcommand (each package's ``register`` adds its own); ``studies=False``: ``run``
+    alone (``main`` for a ``run`` command line: the other subcommands' modules are not imported)."""
     import importlib
     parser = Parser(prog="python -m mechanism", description=DESCRIPTION)
     sub = parser.add_subparsers(dest="command", required=True, metavar="SUBCOMMAND")
@@ -202,7 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-ideal", action="store_true", help="do not run the ideal-joint counterpart")
     p.add_argument("--no-plots", action="store_true", help="write CSV and JSON only")
     p.set_defaults(func=cmd_run)
-    for name in SUBCOMMAND_MODULES:
+    for name in SUBCOMMAND_MODULES if studies else ():
         try:
             module = importlib.import_module(name)
         except ModuleNotFoundError as err:
@@ -214,7 +215,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser(studies=not argv or argv[0] != "run")
     args = parser.parse_args(argv)
     return call(args.func, args)
 
