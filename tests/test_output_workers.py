@@ -63,7 +63,7 @@ def test_a_dead_worker_job_runs_in_process(tmp_path, runs):
         w.call(0, "resample", _ideal(r), r["time"][:5])      # it is up
         pid = w._procs[0].pid
         os.kill(pid, signal.SIGKILL)
-        w._procs[0].wait(5)
+        w._procs[0].join(5)
         out = write_outputs(r, tmp_path, None, workers=w)
     assert [os.path.basename(p) for p in out["plots"]] == ["eccentricity.png", "slider_acceleration.png",
                                                            "crank_moment.png", "joint_force.png", "ball_loads.png",

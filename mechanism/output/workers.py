@@ -5,7 +5,7 @@ PNGs and 0.4 s importing scipy.interpolate for one cubic-spline resampling (a ru
 busy; the other is idle when the machine is). ``OutputWorkers`` starts a process (or two) when the command
 starts: it imports those modules while the master runs, then resamples the ideal counterpart and draws the
 figures (two workers: a share each, ``SHARES``) while the command writes the CSV files. The files are the same bytes as drawn in-process
-(the same functions, ``plots.plot_run`` and ``record.resample``, run in another interpreter) and are written
+(the same functions, ``plots.plot_run`` and ``record.resample``, run in another process) and are written
 atomically as before (``atomic.save_figure``).
 
 Robustness: the workers ignore SIGINT (the command decides what an interrupt does: ``run.stop_on_signals``)
@@ -18,13 +18,10 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import multiprocessing
 import os
 import signal
-import socket
-import subprocess
 import sys
-from contextlib import contextmanager
-from multiprocessing.connection import Connection
 
 #: the figures each of two workers draws: about equal drawing times (a 2-revolution run with its ideal
 #: counterpart, best of 3: joint force 0.45 s, slider acceleration 0.22, energy 0.17, eccentricity 0.10 against
@@ -57,11 +54,18 @@ def _resample(*args):
 JOBS = {"plots": _plots, "resample": _resample}
 
 
-def serve(fd: int, modules) -> None:
-    """A worker (``python -c``, started by ``OutputWorkers``): import ``modules``, then answer each
-    ``(job, args, kwargs)`` received on the socket ``fd`` with ``("ok", value)`` or ``("error", exception)``
-    until ``None`` or the end of the connection."""
-    conn = Connection(fd)
+def _forked(conn, ours, modules) -> None:
+    """The worker process (forked by ``OutputWorkers``): SIGINT ignored, SIGTERM ends it; the command's end of
+    the pipe closed here, so that the command's death is an end of file."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    ours.close()
+    serve(conn, modules)
+
+
+def serve(conn, modules) -> None:
+    """A worker: import ``modules``, then answer each ``(job, args, kwargs)`` received on ``conn`` with
+    ``("ok", value)`` or ``("error", exception)`` until ``None`` or the end of the connection."""
     for name in modules:
         try:
             importlib.import_module(name)
@@ -88,8 +92,8 @@ def serve(fd: int, modules) -> None:
 def count() -> int:
     """How many workers a plotting run starts: ``MECHANISM_OUTPUT_WORKERS`` (default 1, at most 2; 0 draws
     in-process), none on a single-CPU machine (nothing would run beside the master). One worker moves the
-    imports and the drawing off the command's path at the cost of one more interpreter (0.3-0.7 s of CPU,
-    docs/kernels.md); two also halve the drawing but import matplotlib twice, which only pays on an otherwise
+    imports and the drawing off the command's path at the cost of one more process (measured ≈ 15 % more CPU
+    under load, docs/kernels.md); two also halve the drawing but import matplotlib twice, which only pays on an otherwise
     idle second core (measured slower under load)."""
     text = os.environ.get("MECHANISM_OUTPUT_WORKERS", "1").strip()
     try:
@@ -98,39 +102,40 @@ def count() -> int:
         raise ValueError(f"MECHANISM_OUTPUT_WORKERS={text!r} must be 0, 1 or 2") from None
     if not 0 <= n <= 2:
         raise ValueError(f"MECHANISM_OUTPUT_WORKERS={text!r} must be 0, 1 or 2")
-    return n if (os.cpu_count() or 1) >= 2 and os.name == "posix" else 0   # pass_fds: POSIX
+    forks = "fork" in multiprocessing.get_all_start_methods()
+    return n if (os.cpu_count() or 1) >= 2 and forks else 0
 
 
 class OutputWorkers:
-    """Worker processes (a fresh interpreter each: nothing of the run's FMU or compiled kernels inherited) that
-    run ``JOBS``; ``submit`` hands one a job, ``result`` waits for its answer. Use as a context manager.
+    """Worker processes that run ``JOBS``; ``submit`` hands one a job, ``result`` waits for its answer. Use as a
+    context manager.
 
-    A worker is ``python -c`` with this interpreter and ``sys.path`` and one end of a socket pair (pickled
-    messages, ``multiprocessing.connection.Connection``): no multiprocessing start method, so no resource
-    tracker or other helper process is left behind."""
+    A worker is forked (``multiprocessing``'s fork context: no helper process such as a resource tracker) when
+    the command starts, before the run loads its FMU or compiled kernels (one thread, numba not imported: checked
+    when this was written); it inherits the modules imported so far (numpy), so it imports only matplotlib and
+    scipy.interpolate. Jobs and answers are pickled over a pipe."""
 
     def __init__(self, n: int = 1):
         self._procs, self._conns, self._busy = [], [], []
-        with _sigint_ignored():   # inherited: a Ctrl-C in the terminal goes to the command alone
-            for modules in (IMPORTS, *[IMPORTS_OTHERS] * (n - 1)):
+        ctx = multiprocessing.get_context("fork")
+        for stream in (sys.stdout, sys.stderr):   # nothing buffered twice
+            with contextlib.suppress(Exception):
+                stream.flush()
+        for modules in (IMPORTS, *[IMPORTS_OTHERS] * (n - 1)):
+            conn = proc = None
+            try:
+                conn, theirs = ctx.Pipe()
+                proc = ctx.Process(target=_forked, args=(theirs, conn, modules), daemon=True,
+                                   name="mechanism-output")
+                proc.start()
+                theirs.close()
+            except (OSError, ValueError):   # cannot start one: its jobs run here
+                if conn is not None:
+                    conn.close()
                 conn = proc = None
-                try:
-                    ours, theirs = socket.socketpair()
-                except OSError:
-                    ours = theirs = None
-                try:
-                    if theirs is not None:
-                        with theirs:
-                            code = (f"import sys; sys.path[:] = {sys.path!r}; "
-                                    f"from mechanism.output.workers import serve; serve({theirs.fileno()}, {modules!r})")
-                            proc = subprocess.Popen([sys.executable, "-c", code], pass_fds=(theirs.fileno(),),
-                                                    stdin=subprocess.DEVNULL)
-                        conn = Connection(ours.detach())
-                except (OSError, ValueError, TypeError):   # cannot start one (no sys.executable): jobs run here
-                    ours.close()
-                self._procs.append(proc)
-                self._conns.append(conn)
-                self._busy.append(False)
+            self._procs.append(proc)
+            self._conns.append(conn)
+            self._busy.append(False)
 
     def __len__(self) -> int:
         return len(self._procs)
@@ -176,8 +181,7 @@ class OutputWorkers:
         if conn is not None:
             conn.close()
         if proc is not None:
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                proc.wait(timeout=1.0)
+            proc.join(timeout=1.0)
 
     def close(self) -> None:
         """End every worker: one that answered its jobs is idle (or still importing) and writes nothing, so
@@ -194,13 +198,12 @@ class OutputWorkers:
                 conn.send(None)
             except (OSError, ValueError):
                 pass
-            if proc.poll() is None:
+            if proc.is_alive():
                 proc.terminate()
-            try:
-                proc.wait(timeout=5.0)
-            except subprocess.TimeoutExpired:
+            proc.join(timeout=5.0)
+            if proc.is_alive():
                 proc.kill()
-                proc.wait()
+                proc.join()
             conn.close()
             self._procs[k] = self._conns[k] = None
 
@@ -210,17 +213,3 @@ class OutputWorkers:
     def __exit__(self, *exc):
         self.close()
         return False
-
-
-@contextmanager
-def _sigint_ignored():
-    """SIGINT ignored while the block runs (in the main thread; elsewhere nothing changes)."""
-    try:
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    except ValueError:   # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
