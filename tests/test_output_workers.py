@@ -76,3 +76,19 @@ def test_worker_count_is_checked(monkeypatch):
         workers.count()
     monkeypatch.setenv("MECHANISM_OUTPUT_WORKERS", "0")
     assert workers.count() == 0
+
+
+def test_the_shares_are_the_figures_once_each():
+    names = [name for share in workers.SHARES for name in share]
+    assert sorted(names) == sorted(plots.FIGURES) and workers.shares(1) == (tuple(names),)
+
+
+def test_the_command_does_not_import_matplotlib_when_a_worker_draws(tmp_path):
+    """The point of the worker: matplotlib and scipy.interpolate are imported in it, not in the command."""
+    import subprocess
+    import sys
+    code = ("import sys; from mechanism import cli; code = cli.main(sys.argv[1:]); "
+            "print(sorted(m for m in ('matplotlib', 'scipy.interpolate') if m in sys.modules)); sys.exit(code)")
+    out = subprocess.run([sys.executable, "-c", code, "run", "--mode", "inprocess", "--revs", "0.05", "--quiet",
+                          "--out", str(tmp_path)], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "[]" and len(list(tmp_path.glob("*.png"))) == len(plots.FIGURES)

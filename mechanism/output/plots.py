@@ -12,6 +12,7 @@ import numpy as np  # noqa: E402
 from fmu_bearing.parameters import BearingParameters  # noqa: E402
 from mechanism.cosim.record import RunResult  # noqa: E402
 from mechanism.output.atomic import save_figure  # noqa: E402
+from mechanism.output.results import FIGURES  # noqa: E402  (re-exported: its home is matplotlib-free)
 
 
 def crank_pi(r: RunResult) -> np.ndarray:
@@ -158,11 +159,6 @@ def plot_time(axes_row, x: np.ndarray, series: list[tuple[np.ndarray, np.ndarray
 def _label_x(axes_row) -> None:
     for ax in axes_row:
         ax.set_xlabel("crank angle [π rad]")
-
-
-#: the files ``plot_run`` can write, in the order it writes (and returns) them
-FIGURES = ("eccentricity.png", "slider_acceleration.png", "crank_moment.png", "joint_force.png", "ball_loads.png",
-           "energy.png", "slider_position_error.png")
 
 
 def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None, names=None) -> list[Path]:

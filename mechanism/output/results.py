@@ -92,6 +92,11 @@ def output_lock(out: Path):
         os.close(fd)
 
 
+#: the files ``plots.plot_run`` can write, in the order it writes (and returns) them (here, not in ``plots``:
+#: ``write_outputs`` orders the output worker's files without importing matplotlib)
+FIGURES = ("eccentricity.png", "slider_acceleration.png", "crank_moment.png", "joint_force.png", "ball_loads.png",
+           "energy.png", "slider_position_error.png")
+
 #: rows formatted and written at a time by ``write_csv``
 CSV_CHUNK_ROWS = 2000
 
@@ -160,15 +165,15 @@ def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, 
                 drawn[names] = err
     plotted = []
     if draw:
-        from mechanism.output import plots as plotting
         for value in drawn.values():
             if isinstance(value, BaseException):
                 raise value
             plotted += value
-        rest = tuple(name for name in plotting.FIGURES if not any(name in names for names in drawn))
-        if rest:
-            plotted += plotting.plot_run(result, out, ideal, names=rest)
-        order = {name: k for k, name in enumerate(plotting.FIGURES)}
+        rest = tuple(name for name in FIGURES if not any(name in names for names in drawn))
+        if rest:   # no worker (or one that could not take its share): drawn here
+            from mechanism.output.plots import plot_run
+            plotted += plot_run(result, out, ideal, names=rest)
+        order = {name: k for k, name in enumerate(FIGURES)}
         plotted.sort(key=lambda path: order[Path(path).name])
     figures["plots"] = [str(p) for p in plotted]   # returned only (summary.json is written before the plots)
     return figures
