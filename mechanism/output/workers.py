@@ -1,18 +1,18 @@
 """Background processes that take the headline command's fixed output costs off its critical path (issue 11).
 
-``python -m mechanism run`` spends, after its two runs, about 0.7 s importing matplotlib, 2 s drawing seven
-PNGs and 0.4 s importing scipy.interpolate for one cubic-spline resampling (a run's master loop keeps one core
-busy; the other is idle when the machine is). ``OutputWorkers`` starts a process (or two) when the command
-starts: it imports those modules while the master runs, then resamples the ideal counterpart and draws the
-figures (two workers: a share each, ``SHARES``) while the command writes the CSV files. The files are the same bytes as drawn in-process
-(the same functions, ``plots.plot_run`` and ``record.resample``, run in another process) and are written
-atomically as before (``atomic.save_figure``).
+``python -m mechanism run`` spent, after its two runs, about 0.5-0.7 s importing matplotlib, 1.5-2 s drawing
+seven PNGs and 0.4 s importing scipy.interpolate for one cubic-spline resampling, while a run's master loop
+keeps one core busy and leaves the other idle (when the machine is). ``OutputWorkers`` forks a process (or
+two) when the command starts: it imports those modules while the master runs, then resamples the ideal
+counterpart and draws the figures (two workers: a share each, ``SHARES``) while the command writes the CSV
+files. The files are the same bytes as drawn in-process (the same functions, ``plots.plot_run`` and
+``record.resample``, run in another process) and are written atomically as before (``atomic.save_figure``).
 
 Robustness: the workers ignore SIGINT (the command decides what an interrupt does: ``run.stop_on_signals``)
 and end when the command's end of their pipe closes (the command died) or at ``close``; an error in a job is
-raised in the command as if the job had run there; a worker that cannot start or dies makes its job run
-in-process instead. ``MECHANISM_OUTPUT_WORKERS`` (``count``) sets how many; 0 (or a single CPU) does everything
-in-process.
+raised in the command as if the job had run there; a worker that cannot start or dies, or a job that does not
+pickle, makes the job run in-process instead. ``MECHANISM_OUTPUT_WORKERS`` (``count``) sets how many; 0 (or a
+single CPU, or no fork) does everything in-process.
 """
 from __future__ import annotations
 
@@ -92,8 +92,8 @@ def serve(conn, modules) -> None:
 def count() -> int:
     """How many workers a plotting run starts: ``MECHANISM_OUTPUT_WORKERS`` (default 1, at most 2; 0 draws
     in-process), none on a single-CPU machine (nothing would run beside the master). One worker moves the
-    imports and the drawing off the command's path at the cost of one more process (measured ≈ 15 % more CPU
-    under load, docs/kernels.md); two also halve the drawing but import matplotlib twice, which only pays on an otherwise
+    imports and the CSV writing off the command's path at about the same CPU (the fork inherits numpy;
+    docs/kernels.md); two also halve the drawing but import matplotlib twice, which only pays on an otherwise
     idle second core (measured slower under load)."""
     text = os.environ.get("MECHANISM_OUTPUT_WORKERS", "1").strip()
     try:
