@@ -76,6 +76,16 @@ def test_worker_count_is_checked(monkeypatch):
         workers.count()
     monkeypatch.setenv("MECHANISM_OUTPUT_WORKERS", "0")
     assert workers.count() == 0
+    monkeypatch.setenv("MECHANISM_OUTPUT_WORKERS", "1")
+    import threading
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        assert workers.count() == 0      # not forked beside another thread
+    finally:
+        stop.set()
+        other.join()
 
 
 def test_the_shares_are_the_figures_once_each():

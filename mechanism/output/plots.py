@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 from fmu_bearing.parameters import BearingParameters  # noqa: E402
 from mechanism.cosim.record import RunResult  # noqa: E402
 from mechanism.output.atomic import save_figure  # noqa: E402
-from mechanism.output.results import FIGURES  # noqa: E402  (re-exported: its home is matplotlib-free)
+from mechanism.output.figures import FIGURES  # noqa: E402  (re-exported: its home is matplotlib-free)
 
 
 def crank_pi(r: RunResult) -> np.ndarray:

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..cosim.record import RunResult, energy_summary, unit_of
 from .atomic import atomic_open
+from .figures import FIGURES
 from .life import run_life
 
 
@@ -91,11 +92,6 @@ def output_lock(out: Path):
     finally:
         os.close(fd)
 
-
-#: the files ``plots.plot_run`` can write, in the order it writes (and returns) them (here, not in ``plots``:
-#: ``write_outputs`` orders the output worker's files without importing matplotlib)
-FIGURES = ("eccentricity.png", "slider_acceleration.png", "crank_moment.png", "joint_force.png", "ball_loads.png",
-           "energy.png", "slider_position_error.png")
 
 #: rows formatted and written at a time by ``write_csv``
 CSV_CHUNK_ROWS = 2000

@@ -22,6 +22,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 
 #: the figures each of two workers draws: about equal drawing times (a 2-revolution run with its ideal
 #: counterpart, best of 3: joint force 0.45 s, slider acceleration 0.22, energy 0.17, eccentricity 0.10 against
@@ -91,7 +92,8 @@ def serve(conn, modules) -> None:
 
 def count() -> int:
     """How many workers a plotting run starts: ``MECHANISM_OUTPUT_WORKERS`` (default 1, at most 2; 0 draws
-    in-process), none on a single-CPU machine (nothing would run beside the master). One worker moves the
+    in-process), none on a single-CPU machine (nothing would run beside the master) or in a process with
+    other threads (a fork copies only the calling one). One worker moves the
     imports and the CSV writing off the command's path at about the same CPU (the fork inherits numpy;
     docs/kernels.md); two also halve the drawing but import matplotlib twice, which only pays on an otherwise
     idle second core (measured slower under load)."""
@@ -102,7 +104,8 @@ def count() -> int:
         raise ValueError(f"MECHANISM_OUTPUT_WORKERS={text!r} must be 0, 1 or 2") from None
     if not 0 <= n <= 2:
         raise ValueError(f"MECHANISM_OUTPUT_WORKERS={text!r} must be 0, 1 or 2")
-    forks = "fork" in multiprocessing.get_all_start_methods()
+    # a fork copies one thread: a process with others (a host application) draws in-process instead
+    forks = "fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1
     return n if (os.cpu_count() or 1) >= 2 and forks else 0
 
 
