@@ -9,12 +9,15 @@ Prints, measured in one run (this machine is shared: compare the ratios, and run
 * the same loop with the force law in-process, µs per step (target <= 15 µs on the development machine);
 * the same loop with the ideal joint (no bearing), µs per step;
 * the wall time of the headline command ``python -m mechanism run`` (warm: the FMU built, the kernels
-  compiled and cached; CSV and plots included; target <= 3 s);
+  compiled and cached; CSV and plots included; target <= 3 s) and its split: start-up and imports, the FMU
+  run (loading kernels and FMU, then the loop), the ideal counterpart, the outputs (``cli.PHASES``); with
+  ``--outputs-pair`` once more with the outputs drawn in-process (``MECHANISM_OUTPUT_WORKERS=0``);
 * with ``--cold``, the wall time of the first run in a fresh numba cache (the compile, target <= 15 s).
 
 Each loop figure is the median of ``--repeat`` runs, interleaved so that load changes hit them alike.
 
-    python benchmarks/cosim.py [--revs 2] [--rpm 1200] [--step 1e-5] [--repeat 3] [--cold] [--scheme NAME]
+    python benchmarks/cosim.py [--revs 2] [--rpm 1200] [--step 1e-5] [--repeat 3] [--cold] [--outputs-pair]
+                               [--scheme NAME]
 
 Runs against whatever ``mechanism`` is on the path (PYTHONPATH=<checkout> for a before/after pair;
 ``--cold`` needs the compiled master).
@@ -23,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import json
 import math
 import os
 import statistics
@@ -80,6 +84,28 @@ def loop_us(config: RunConfig) -> float:
     return wall * 1e6 / round(config.revs * config.crank_period / config.step)
 
 
+#: the headline command as ``python -m mechanism run`` runs it, then its phases (``cli.PHASES``) as JSON on the
+#: last line of stderr
+HEADLINE = ("import json, sys; from mechanism import cli; code = cli.main(sys.argv[1:]); "
+            "print(json.dumps(cli.PHASES), file=sys.stderr); sys.exit(code)")
+
+
+def headline(extra_env: dict | None = None) -> dict:
+    """Wall seconds of the headline command (2 revolutions, CSV, ideal counterpart, plots) as a whole process,
+    ``total``, and its split: ``run`` (the FMU run: loading the cached kernels and the FMU, then the master
+    loop), ``ideal`` (the ideal-joint counterpart), ``outputs`` (CSV, summary.json and the plots, or waiting for
+    the output worker drawing them), ``startup`` (the rest: the interpreter, every import, process exit)."""
+    env = dict(os.environ, **(extra_env or {}))
+    with tempfile.TemporaryDirectory() as out:
+        t0 = time.perf_counter()
+        proc = subprocess.run([sys.executable, "-c", HEADLINE, "run", "--quiet", "--out", out], check=True, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        total = time.perf_counter() - t0
+    phases = json.loads(proc.stderr.strip().splitlines()[-1])
+    split = {k: phases[k] for k in ("run", "ideal", "outputs")}
+    return {"total": total, "startup": total - sum(split.values()), **split}
+
+
 def headline_s(extra_env: dict | None = None) -> float:
     """Wall time [s] of ``python -m mechanism run`` (2 revolutions, CSV, ideal counterpart, plots)."""
     env = dict(os.environ, **(extra_env or {}))
@@ -97,6 +123,8 @@ def main() -> None:
     p.add_argument("--step", type=float, default=1e-5)
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--cold", action="store_true", help="also time a first run in a fresh numba cache")
+    p.add_argument("--outputs-pair", action="store_true",
+                   help="also time the headline with its outputs in-process (MECHANISM_OUTPUT_WORKERS=0)")
     p.add_argument("--scheme", default=None, help="coupling scheme of the loops (default: the run's default)")
     a = p.parse_args()
     base = RunConfig(rpm=a.rpm, revs=a.revs, step=a.step, output_interval=a.step, progress=False,
@@ -122,7 +150,14 @@ def main() -> None:
           f"{med['inprocess'] / med['bare']:6.2f} x the bare exchange (target <= 15 µs)")
     print(f"ideal-joint loop (no bearing)              {med['ideal']:8.1f} µs/step   "
           f"{med['ideal'] / med['bare']:6.2f} x the bare exchange")
-    print(f"headline `python -m mechanism run` (warm)  {headline_s():8.2f} s (target <= 3 s)")
+    same = (a.revs, a.rpm, a.step, base.scheme) == (2.0, 1200.0, 1e-5, RunConfig().scheme)   # the headline's run
+    for label, env in (("", None), *(("outputs in-process", {"MECHANISM_OUTPUT_WORKERS": "0"}),) * a.outputs_pair):
+        h = headline(env)
+        print(f"headline `python -m mechanism run` (warm)  {h['total']:8.2f} s (target <= 3 s)"
+              + (f", {label}" if label else ""))
+        print(f"  start-up and imports {h['startup']:.2f} s, FMU run {h['run']:.2f} s"
+              + (f" (a warm run in this process: {med['cosim'] * steps * 1e-6:.2f} s)" if same else "")
+              + f", ideal counterpart {h['ideal']:.2f} s, CSV + summary + plots {h['outputs']:.2f} s")
     if a.cold:
         with tempfile.TemporaryDirectory() as cache:
             print(f"first run, fresh numba cache (compiling)   {headline_s({'NUMBA_CACHE_DIR': cache}):8.2f} s "

@@ -2,10 +2,13 @@
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import signal
 import sys
 import threading
+import time
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -85,22 +88,35 @@ def check_output_folder(out: Path) -> None:
 EXIT_INTERRUPTED = 130
 
 
+#: wall seconds of the last ``cmd_run``'s phases: imports (of the run's modules), run (the master, with the
+#: compiled kernels' and the FMU's loading), ideal (the counterpart), outputs (CSV, summary, plots);
+#: benchmarks/cosim.py prints them
+PHASES: dict[str, float] = {}
+
+
 def cmd_run(args) -> int:
+    start = time.perf_counter()
     from mechanism.output.results import output_lock, write_outputs
     from mechanism.run import interrupted, run, stop_on_signals
     from mechanism.ssp.config import config_from_ssp_args
     out = Path(args.out)
     check_output_folder(out)
     config = config_from_ssp_args(args) if args.ssp else config_from_args(args)
-    with output_lock(out):
+    PHASES.clear()
+    with output_lock(out), output_workers(not args.no_plots) as workers:
+        marks = [start, time.perf_counter()]
         result = run(config)
+        marks.append(time.perf_counter())
         stopped = interrupted()
         ideal = None
         if not stopped and config.joint != "ideal" and not args.no_ideal:
-            ideal = ideal_counterpart(config, result)
+            ideal = ideal_counterpart(config, result, workers)
             stopped = interrupted()
+        marks.append(time.perf_counter())
         with stop_on_signals():   # a signal while writing waits until the files are complete
-            figures = write_outputs(result, out, ideal, plots=not args.no_plots and not stopped)
+            figures = write_outputs(result, out, ideal, plots=not args.no_plots and not stopped, workers=workers)
+        marks.append(time.perf_counter())
+    PHASES.update(zip(("imports", "run", "ideal", "outputs"), (b - a for a, b in itertools.pairwise(marks))))
     files = "timeseries.csv" + (", ideal_timeseries.csv" if ideal is not None else "") + ", summary.json"
     print(f"wrote {out}/{files}" + (f" and {len(figures['plots'])} plots" if figures["plots"] else ""))
     label, part = ("second revolution", figures["rev2"]) if "rev2" in figures else ("whole run", figures.get("all"))
@@ -121,11 +137,26 @@ def cmd_run(args) -> int:
     return 0
 
 
-def ideal_counterpart(config: "RunConfig", result):
+@contextmanager
+def output_workers(plots: bool):
+    """``mechanism.output.workers.OutputWorkers`` for a run that plots (they import matplotlib and scipy while
+    the run runs), None otherwise or where they are disabled."""
+    from mechanism.output import workers
+    n = workers.count() if plots else 0
+    if not n:
+        yield None
+        return
+    with workers.OutputWorkers(n) as started:
+        yield started
+
+
+def ideal_counterpart(config: "RunConfig", result, workers=None):
     """The ideal joint's run for comparison, at the cheapest step that keeps its documented agreement
     (``IDEAL_STEP``: RK4 at 1e-4 s matches 1e-5 s to < 1e-9, mechanism.studies.reproduce.cases), resampled
     by cubic splines onto the bearing run's sample times when those are finer (error < 1e-9 relative
-    for these smooth signals; measured in tests/test_kernels.py)."""
+    for these smooth signals; measured in tests/test_kernels.py). ``workers``: the resampling runs in the
+    first output worker, which imported scipy.interpolate while the run ran (the same function, the same
+    numbers)."""
     from dataclasses import replace
 
     from mechanism.cosim.record import resample
@@ -135,7 +166,7 @@ def ideal_counterpart(config: "RunConfig", result):
     ideal = run(replace(config, joint="ideal", mode="cosim", settings={}, balls=None, step=step, record_every=None,
                         output_interval=max(step, config.output_interval)))
     if ideal.ok and len(ideal.data) > 1 and ideal.meta.get("output_interval_s") != result.meta.get("output_interval_s"):
-        ideal = resample(ideal, result["time"])
+        ideal = workers.call(0, "resample", ideal, result["time"]) if workers else resample(ideal, result["time"])
     return ideal
 
 
@@ -157,8 +188,9 @@ DESCRIPTION = ("Co-simulate the slider-crank of Xu et al. (2012) with its crank-
                "(also installed as bearing-cosim). 'python -m mechanism SUBCOMMAND --help' describes each.")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The parser with every subcommand (each package's ``register`` adds its own)."""
+def build_parser(studies: bool = True) -> argparse.ArgumentParser:
+    """The parser with every subcommand (each package's ``register`` adds its own); ``studies=False``: ``run``
+    alone (``main`` for a ``run`` command line: the other subcommands' modules are not imported)."""
     import importlib
     parser = Parser(prog="python -m mechanism", description=DESCRIPTION)
     sub = parser.add_subparsers(dest="command", required=True, metavar="SUBCOMMAND")
@@ -171,7 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-ideal", action="store_true", help="do not run the ideal-joint counterpart")
     p.add_argument("--no-plots", action="store_true", help="write CSV and JSON only")
     p.set_defaults(func=cmd_run)
-    for name in SUBCOMMAND_MODULES:
+    for name in SUBCOMMAND_MODULES if studies else ():
         try:
             module = importlib.import_module(name)
         except ModuleNotFoundError as err:
@@ -183,7 +215,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser(studies=not argv or argv[0] != "run")
     args = parser.parse_args(argv)
     return call(args.func, args)
 

@@ -12,6 +12,7 @@ import numpy as np  # noqa: E402
 from fmu_bearing.parameters import BearingParameters  # noqa: E402
 from mechanism.cosim.record import RunResult  # noqa: E402
 from mechanism.output.atomic import save_figure  # noqa: E402
+from mechanism.output.figures import FIGURES  # noqa: E402  (re-exported: its home is matplotlib-free)
 
 
 def crank_pi(r: RunResult) -> np.ndarray:
@@ -160,11 +161,19 @@ def _label_x(axes_row) -> None:
         ax.set_xlabel("crank angle [π rad]")
 
 
-def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None) -> list[Path]:
+def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None, names=None) -> list[Path]:
     """The standard plots of a bearing (or ideal) run; the ideal joint drawn for comparison if given.
     Time plots have a start-up panel beside the steady revolution, so the start-up impacts do not set the
-    scale of the steady motion."""
+    scale of the steady motion. ``names`` (of ``FIGURES``) draws only those (``mechanism.output.workers``
+    shares the figures between processes); None draws all."""
     out = Path(out)
+    unknown = set(names or ()) - set(FIGURES)
+    if unknown:
+        raise ValueError(f"no such plot: {sorted(unknown)} (plots are {FIGURES})")
+
+    def want(name: str) -> bool:
+        return names is None or name in names
+
     paths = []
     x = crank_pi(r)
     title = run_title(r)
@@ -178,7 +187,7 @@ def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None) -> list[Pa
         items.append((x, r[col] * scale, {"lw": 0.8, "label": joint}))
         return items
 
-    if bearing:
+    if bearing and want("eccentricity.png"):
         fig, ax = plt.subplots(figsize=(5.5, 5))
         plot_trajectory(ax, r, "journal centre")
         ax.set_title(f"Eccentricity trajectory\n({title})", fontsize=10)
@@ -189,6 +198,8 @@ def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None) -> list[Pa
     for name, col, ylabel, heading in (
             ("slider_acceleration.png", "slider_a", "slider acceleration [m/s²]", "Slider acceleration"),
             ("crank_moment.png", "crank_moment", "crank moment [N·m]", "Driving moment for constant crank speed")):
+        if not want(name):
+            continue
         fig, axes = time_panels()
         plot_time(axes[0], x, series(col), ylabel)
         _label_x(axes[0])
@@ -197,16 +208,17 @@ def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None) -> list[Pa
         _margins(fig, top=0.6)
         paths.append(_save(fig, out / name))
 
-    fig, axes = time_panels(2, 3.0)
-    for row, col in zip(axes, ("F_x", "F_y")):
-        plot_time(row, x, series(col), f"joint force {col} [N]")
-    _label_x(axes[-1])
-    axes[0, 1].legend(fontsize=8)
-    fig.suptitle(f"Joint force on the crank (housing) ({title})", fontsize=10)
-    _margins(fig, top=0.6, hspace=0.6)
-    paths.append(_save(fig, out / "joint_force.png"))
+    if want("joint_force.png"):
+        fig, axes = time_panels(2, 3.0)
+        for row, col in zip(axes, ("F_x", "F_y")):
+            plot_time(row, x, series(col), f"joint force {col} [N]")
+        _label_x(axes[-1])
+        axes[0, 1].legend(fontsize=8)
+        fig.suptitle(f"Joint force on the crank (housing) ({title})", fontsize=10)
+        _margins(fig, top=0.6, hspace=0.6)
+        paths.append(_save(fig, out / "joint_force.png"))
 
-    loads = r.ball_load_columns[:n_balls(r)] if bearing else []
+    loads = r.ball_load_columns[:n_balls(r)] if bearing and want("ball_loads.png") else []
     if loads:
         cols = 1 if len(loads) <= 8 else 2
         rows = -(-len(loads) // cols)
@@ -228,7 +240,7 @@ def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None) -> list[Pa
         _margins(fig, top=0.55, wspace=0.6, hspace=0.12)
         paths.append(_save(fig, out / "ball_loads.png"))
 
-    if r.has("energy_residual"):
+    if r.has("energy_residual") and want("energy.png"):
         fig, ax = plt.subplots(figsize=(8, 4))
         for col, label in (("damping_dissipation", "damping dissipation D"), ("contact_energy", "contact energy V"),
                            ("cage_work", "cage work"), ("energy_residual", "residual (coupling)")):
@@ -241,7 +253,7 @@ def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None) -> list[Pa
         _margins(fig, top=0.55)
         paths.append(_save(fig, out / "energy.png"))
 
-    if ideal is not None and len(ideal["time"]) >= len(r["time"]):
+    if ideal is not None and len(ideal["time"]) >= len(r["time"]) and want("slider_position_error.png"):
         k = len(r["time"])
         fig, axes = time_panels()
         plot_time(axes[0], x, [(x, (r["slider_x"] - ideal["slider_x"][:k]) * 1e6, {"lw": 0.8})],

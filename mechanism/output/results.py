@@ -17,6 +17,7 @@ import numpy as np
 
 from ..cosim.record import RunResult, energy_summary, unit_of
 from .atomic import atomic_open
+from .figures import FIGURES
 from .life import run_life
 
 
@@ -132,14 +133,50 @@ def read_csv(path: Path) -> RunResult:
     return RunResult([h.split(" [")[0] for h in header], data)
 
 
-def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, plots: bool = True) -> dict:
+def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, plots: bool = True,
+                  workers=None) -> dict:
     """timeseries.csv, summary.json (with the ideal joint's figures if given) and the PNG plots into ``out``.
 
     Returns the figures of summary.json plus ``plots``, the PNG files written. If a CSV cannot be written
-    (a full disk) summary.json still is, with ``write_error``, and the OSError is raised.
+    (a full disk) summary.json still is, with ``write_error``, and the OSError is raised. ``workers``
+    (``mechanism.output.workers.OutputWorkers``) draw the plots while the CSV files are written; without,
+    they are drawn here, after the CSV files.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    draw = plots and len(result["time"]) > 1
+    shares = []
+    if draw and workers is not None:
+        from mechanism.output.workers import shares as shares_of
+        shares = [(k, names) for k, names in enumerate(shares_of(len(workers)))
+                  if workers.submit(k, "plots", result, out, ideal, names=names)]
+    try:
+        figures = _write_tables(result, out, ideal)
+    finally:   # the workers' files are complete before anything else happens (an error is raised after)
+        drawn = {}
+        for k, names in shares:
+            try:
+                drawn[names] = workers.result(k, "plots", result, out, ideal, names=names)
+            except BaseException as err:   # noqa: BLE001 - raised below, after the other share is complete
+                drawn[names] = err
+    plotted = []
+    if draw:
+        for value in drawn.values():
+            if isinstance(value, BaseException):
+                raise value
+            plotted += value
+        rest = tuple(name for name in FIGURES if not any(name in names for names in drawn))
+        if rest:   # no worker (or one that could not take its share): drawn here
+            from mechanism.output.plots import plot_run
+            plotted += plot_run(result, out, ideal, names=rest)
+        order = {name: k for k, name in enumerate(FIGURES)}
+        plotted.sort(key=lambda path: order[Path(path).name])
+    figures["plots"] = [str(p) for p in plotted]   # returned only (summary.json is written before the plots)
+    return figures
+
+
+def _write_tables(result: RunResult, out: Path, ideal: RunResult | None) -> dict:
+    """``write_outputs``'s CSV files and summary.json; returns the summary's figures."""
     figures = summary(result)
     try:
         write_csv(result, out / "timeseries.csv")
@@ -158,9 +195,4 @@ def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, 
                 np.sqrt(np.mean((result["slider_a"] - ideal["slider_a"][:k]) ** 2)))
             figures["max_slider_position_error_m"] = float(np.max(np.abs(result["slider_x"] - ideal["slider_x"][:k])))
     write_json(figures, out / "summary.json")
-    plotted = []
-    if plots and len(result["time"]) > 1:
-        from mechanism.output.plots import plot_run
-        plotted = plot_run(result, out, ideal)
-    figures["plots"] = [str(p) for p in plotted]   # returned only (summary.json is written before the plots)
     return figures

@@ -1,0 +1,218 @@
+"""Background processes that take the headline command's fixed output costs off its critical path (issue 11).
+
+``python -m mechanism run`` spent, after its two runs, about 0.5-0.7 s importing matplotlib, 1.5-2 s drawing
+seven PNGs and 0.4 s importing scipy.interpolate for one cubic-spline resampling, while a run's master loop
+keeps one core busy and leaves the other idle (when the machine is). ``OutputWorkers`` forks a process (or
+two) when the command starts: it imports those modules while the master runs, then resamples the ideal
+counterpart and draws the figures (two workers: a share each, ``SHARES``) while the command writes the CSV
+files. The files are the same bytes as drawn in-process (the same functions, ``plots.plot_run`` and
+``record.resample``, run in another process) and are written atomically as before (``atomic.save_figure``).
+
+Robustness: the workers ignore SIGINT (the command decides what an interrupt does: ``run.stop_on_signals``)
+and end when the command's end of their pipe closes (the command died) or at ``close``; an error in a job is
+raised in the command as if the job had run there; a worker that cannot start or dies, or a job that does not
+pickle, makes the job run in-process instead. ``MECHANISM_OUTPUT_WORKERS`` (``count``) sets how many; 0 (or a
+single CPU, or no fork) does everything in-process.
+"""
+from __future__ import annotations
+
+import contextlib
+import importlib
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+
+#: the figures each of two workers draws: about equal drawing times (a 2-revolution run with its ideal
+#: counterpart, best of 3: joint force 0.45 s, slider acceleration 0.22, energy 0.17, eccentricity 0.10 against
+#: ball loads 0.45, slider position error 0.21, crank moment 0.20); one worker draws them all
+SHARES = (("joint_force.png", "slider_acceleration.png", "energy.png", "eccentricity.png"),
+          ("ball_loads.png", "slider_position_error.png", "crank_moment.png"))
+
+#: modules a worker imports while it waits for its first job (the first also resamples)
+IMPORTS = ("mechanism.output.plots", "mechanism.cosim.record", "scipy.interpolate")
+IMPORTS_OTHERS = ("mechanism.output.plots",)
+
+
+def shares(n: int) -> tuple[tuple[str, ...], ...]:
+    """The figures each of ``n`` workers draws (``SHARES`` for two, all of them for one)."""
+    if n <= 1:
+        return (tuple(name for share in SHARES for name in share),)
+    return SHARES
+
+
+def _plots(*args, **kwargs):
+    from mechanism.output.plots import plot_run
+    return plot_run(*args, **kwargs)
+
+
+def _resample(*args):
+    from mechanism.cosim.record import resample
+    return resample(*args)
+
+
+JOBS = {"plots": _plots, "resample": _resample}
+
+
+def _forked(conn, ours, modules) -> None:
+    """The worker process (forked by ``OutputWorkers``): SIGINT ignored, SIGTERM ends it; the command's end of
+    the pipe closed here, so that the command's death is an end of file."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    ours.close()
+    serve(conn, modules)
+
+
+def serve(conn, modules) -> None:
+    """A worker: import ``modules``, then answer each ``(job, args, kwargs)`` received on ``conn`` with
+    ``("ok", value)`` or ``("error", exception)`` until ``None`` or the end of the connection."""
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except ImportError:   # the job will raise it where it is needed
+            pass
+    while True:
+        try:
+            job = conn.recv()
+        except (EOFError, OSError):
+            return
+        if job is None:
+            return
+        name, args, kwargs = job
+        try:
+            answer = ("ok", JOBS[name](*args, **kwargs))
+        except Exception as err:   # noqa: BLE001 - raised again in the command
+            answer = ("error", err)
+        try:
+            conn.send(answer)
+        except Exception as err:   # noqa: BLE001 - an exception that does not pickle
+            conn.send(("error", RuntimeError(f"{type(err).__name__} in output worker: {err}")))
+
+
+def count() -> int:
+    """How many workers a plotting run starts: ``MECHANISM_OUTPUT_WORKERS`` (default 1, at most 2; 0 draws
+    in-process), none on a single-CPU machine (nothing would run beside the master) or in a process with
+    other threads (a fork copies only the calling one). One worker moves the
+    imports and the CSV writing off the command's path at about the same CPU (the fork inherits numpy;
+    docs/kernels.md); two also halve the drawing but import matplotlib twice, which only pays on an otherwise
+    idle second core (measured slower under load)."""
+    text = os.environ.get("MECHANISM_OUTPUT_WORKERS", "1").strip()
+    try:
+        n = int(text)
+    except ValueError:
+        raise ValueError(f"MECHANISM_OUTPUT_WORKERS={text!r} must be 0, 1 or 2") from None
+    if not 0 <= n <= 2:
+        raise ValueError(f"MECHANISM_OUTPUT_WORKERS={text!r} must be 0, 1 or 2")
+    # a fork copies one thread: a process with others (a host application) draws in-process instead
+    forks = "fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1
+    return n if (os.cpu_count() or 1) >= 2 and forks else 0
+
+
+class OutputWorkers:
+    """Worker processes that run ``JOBS``; ``submit`` hands one a job, ``result`` waits for its answer. Use as a
+    context manager.
+
+    A worker is forked (``multiprocessing``'s fork context: no helper process such as a resource tracker) when
+    the command starts, before the run loads its FMU or compiled kernels (one thread, numba not imported: checked
+    when this was written); it inherits the modules imported so far (numpy), so it imports only matplotlib and
+    scipy.interpolate. Jobs and answers are pickled over a pipe."""
+
+    def __init__(self, n: int = 1):
+        self._procs, self._conns, self._busy = [], [], []
+        ctx = multiprocessing.get_context("fork")
+        for stream in (sys.stdout, sys.stderr):   # nothing buffered twice
+            with contextlib.suppress(Exception):
+                stream.flush()
+        for modules in (IMPORTS, *[IMPORTS_OTHERS] * (n - 1)):
+            conn = proc = None
+            try:
+                conn, theirs = ctx.Pipe()
+                proc = ctx.Process(target=_forked, args=(theirs, conn, modules), daemon=True,
+                                   name="mechanism-output")
+                proc.start()
+                theirs.close()
+            except (OSError, ValueError):   # cannot start one: its jobs run here
+                if conn is not None:
+                    conn.close()
+                conn = proc = None
+            self._procs.append(proc)
+            self._conns.append(conn)
+            self._busy.append(False)
+
+    def __len__(self) -> int:
+        return len(self._procs)
+
+    def submit(self, k: int, job: str, *args, **kwargs) -> bool:
+        """Hand worker ``k`` a job; False if it is not there (then run the job in-process)."""
+        conn = self._conns[k] if k < len(self._conns) else None
+        if conn is None or self._busy[k]:
+            return False
+        try:
+            conn.send((job, args, kwargs))
+        except (OSError, ValueError):   # it died (a broken pipe)
+            self._lost(k)
+            return False
+        except Exception:   # noqa: BLE001 - the job does not pickle (nothing was sent): it runs in-process
+            return False
+        self._busy[k] = True
+        return True
+
+    def result(self, k: int, job: str, *args, **kwargs):
+        """The answer to worker ``k``'s job (its exception raised here); if the worker died meanwhile, the
+        job (given again as ``job, args, kwargs``) runs in-process."""
+        try:
+            status, value = self._conns[k].recv()
+        except (EOFError, OSError):
+            self._lost(k)
+            return JOBS[job](*args, **kwargs)
+        finally:
+            self._busy[k] = False
+        if status == "error":
+            raise value
+        return value
+
+    def call(self, k: int, job: str, *args, **kwargs):
+        """``job(*args, **kwargs)`` in worker ``k`` (in-process if it is not there)."""
+        if not self.submit(k, job, *args, **kwargs):
+            return JOBS[job](*args, **kwargs)
+        return self.result(k, job, *args, **kwargs)
+
+    def _lost(self, k: int) -> None:
+        conn, proc = self._conns[k], self._procs[k]
+        self._conns[k] = self._procs[k] = None
+        if conn is not None:
+            conn.close()
+        if proc is not None:
+            proc.join(timeout=1.0)
+
+    def close(self) -> None:
+        """End every worker: one that answered its jobs is idle (or still importing) and writes nothing, so
+        it is terminated; one with a job in flight is waited for (its files are written whole)."""
+        for k, (proc, conn) in enumerate(zip(self._procs, self._conns)):
+            if proc is None:
+                continue
+            if self._busy[k]:
+                try:
+                    conn.recv()
+                except (EOFError, OSError):
+                    pass
+            try:
+                conn.send(None)
+            except (OSError, ValueError):
+                pass
+            if proc.is_alive():
+                proc.terminate()
+            proc.join(timeout=5.0)
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
+            conn.close()
+            self._procs[k] = self._conns[k] = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False

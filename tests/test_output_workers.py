@@ -1,0 +1,104 @@
+"""The headline command's output workers (mechanism/output/workers.py, issue 11): the files drawn in a worker are
+the bytes drawn in-process, a job's error is raised in the command, a dead worker's job runs in-process."""
+import os
+import signal
+
+import numpy as np
+import pytest
+
+from mechanism.cosim.record import RunResult, resample
+from mechanism.output import plots, workers
+from mechanism.output.results import write_outputs
+
+
+@pytest.fixture(scope="module")
+def runs():
+    """A short run (the force law in-process) and its ideal counterpart, as the command makes them."""
+    from mechanism.cli import ideal_counterpart
+    from mechanism.run import RunConfig, run
+    config = RunConfig(revs=0.1, mode="inprocess", progress=False)
+    r = run(config)
+    return r, ideal_counterpart(config, r)
+
+
+def _ideal(r: RunResult) -> RunResult:
+    """Every 10th sample of a run, as a coarser run to resample."""
+    return RunResult(r.columns, r.data[::10].copy(), dict(r.meta))
+
+
+def test_worker_files_are_the_in_process_files(tmp_path, runs):
+    r, ideal = runs
+    here = write_outputs(r, tmp_path / "here", ideal)
+    for n in (1, 2):
+        with workers.OutputWorkers(n) as w:
+            there = write_outputs(r, tmp_path / f"w{n}", ideal, workers=w)
+        assert [os.path.basename(p) for p in there["plots"]] == [os.path.basename(p) for p in here["plots"]]
+        assert len(there["plots"]) == len(plots.FIGURES)
+        for name in os.listdir(tmp_path / "here"):
+            assert (tmp_path / f"w{n}" / name).read_bytes() == (tmp_path / "here" / name).read_bytes(), name
+        assert not list((tmp_path / f"w{n}").glob(".*.tmp*"))
+
+
+def test_worker_resampling_is_the_in_process_resampling(runs):
+    r = runs[0]
+    coarse = _ideal(r)
+    with workers.OutputWorkers(1) as w:
+        got = w.call(0, "resample", coarse, r["time"])
+    ref = resample(coarse, r["time"])
+    assert got.columns == ref.columns and np.array_equal(got.data, ref.data) and got.meta == ref.meta
+
+
+def test_a_job_error_is_raised_in_the_command_and_the_worker_goes_on(tmp_path, runs):
+    r = runs[0]
+    with workers.OutputWorkers(1) as w:
+        with pytest.raises(ValueError, match="no such plot"):
+            w.call(0, "plots", r, tmp_path, None, names=("nonsense.png",))
+        assert [p.name for p in w.call(0, "plots", r, tmp_path, None, names=("energy.png", "joint_force.png"))] \
+            == ["joint_force.png", "energy.png"]
+
+
+def test_a_dead_worker_job_runs_in_process(tmp_path, runs):
+    r = runs[0]
+    with workers.OutputWorkers(1) as w:
+        w.call(0, "resample", _ideal(r), r["time"][:5])      # it is up
+        pid = w._procs[0].pid
+        os.kill(pid, signal.SIGKILL)
+        w._procs[0].join(5)
+        out = write_outputs(r, tmp_path, None, workers=w)
+    assert [os.path.basename(p) for p in out["plots"]] == ["eccentricity.png", "slider_acceleration.png",
+                                                           "crank_moment.png", "joint_force.png", "ball_loads.png",
+                                                           "energy.png"]
+
+
+def test_worker_count_is_checked(monkeypatch):
+    monkeypatch.setenv("MECHANISM_OUTPUT_WORKERS", "3")
+    with pytest.raises(ValueError, match="MECHANISM_OUTPUT_WORKERS"):
+        workers.count()
+    monkeypatch.setenv("MECHANISM_OUTPUT_WORKERS", "0")
+    assert workers.count() == 0
+    monkeypatch.setenv("MECHANISM_OUTPUT_WORKERS", "1")
+    import threading
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        assert workers.count() == 0      # not forked beside another thread
+    finally:
+        stop.set()
+        other.join()
+
+
+def test_the_shares_are_the_figures_once_each():
+    names = [name for share in workers.SHARES for name in share]
+    assert sorted(names) == sorted(plots.FIGURES) and workers.shares(1) == (tuple(names),)
+
+
+def test_the_command_does_not_import_matplotlib_when_a_worker_draws(tmp_path):
+    """The point of the worker: matplotlib and scipy.interpolate are imported in it, not in the command."""
+    import subprocess
+    import sys
+    code = ("import sys; from mechanism import cli; code = cli.main(sys.argv[1:]); "
+            "print(sorted(m for m in ('matplotlib', 'scipy.interpolate') if m in sys.modules)); sys.exit(code)")
+    out = subprocess.run([sys.executable, "-c", code, "run", "--mode", "inprocess", "--revs", "0.05", "--quiet",
+                          "--out", str(tmp_path)], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "[]" and len(list(tmp_path.glob("*.png"))) == len(plots.FIGURES)
