@@ -453,3 +453,40 @@ def test_fmu_states_saved_in_c_behave_as_pythonfmus(sides, model, capsys):
         assert x == y
     refused = [r for r in records[0] if r[0] in ("old s2 on reinitialised a", "step")]
     assert any(r[-1] for r in refused), "the state of another initialisation must be refused with a message"
+
+
+# --- review findings ----------------------------------------------------------------------------------------
+
+_FOREIGN_GET_REAL = r"""
+#include <stddef.h>
+int fmi2GetReal(void *c, const unsigned *vr, size_t n, double *v) {
+    for (size_t i = 0; i < n; i++) v[i] = 42.0;
+    return 0;
+}
+"""
+
+
+def test_directional_derivative_ignores_a_foreign_global_fmi2GetReal(pair, model, tmp_path):
+    """Another library exporting fmi2GetReal (another FMU, a host), loaded RTLD_GLOBAL before the FMU: the
+    loader's fmi2GetDirectionalDerivative still reads its own tangent outputs (not the foreign function's 42)."""
+    pytest.importorskip("ziglang", reason="compiling the foreign library needs the 'ziglang' package")
+    source = tmp_path / "foreign.c"
+    source.write_text(_FOREIGN_GET_REAL, encoding="utf-8")
+    library = tmp_path / "libforeign.so"
+    proc = subprocess.run([sys.executable, "-m", "ziglang", "cc", "-shared", "-fPIC", "-o", str(library),
+                           str(source)], capture_output=True, text=True)
+    if proc.returncode != 0:
+        pytest.skip(f"no C compiler for the foreign library: {proc.stderr[:300]}")
+    ctypes.CDLL(str(library), mode=ctypes.RTLD_GLOBAL)
+    _, vr, _ = model
+    pair.start([2e-5, 1e-5, 0.0, 0.0, 100.0, 0.0])
+    fmu = pair.c
+    assert fmu.do_step(0.0, 1e-5) == OK
+    assert pair.kernel_steps() == 1
+    unknown, known = (ctypes.c_uint * 1)(vr["F_x"]), (ctypes.c_uint * 1)(vr["e_x"])
+    seed, out = (ctypes.c_double * 1)(1.0), (ctypes.c_double * 1)()
+    status = fmu.fmu.fmi2GetDirectionalDerivative(fmu.fmu.component, unknown, 1, known, 1, seed, out)
+    import struct
+    stiffness = struct.unpack("<d", fmu.get_real([vr["stiffness_xx"]])[1][0])[0]
+    assert status == OK
+    assert out[0] == stiffness != 42.0

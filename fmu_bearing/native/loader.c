@@ -1265,10 +1265,10 @@ EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], si
     return fmi.SetReal(inst->inner, vr, n, v);
 }
 
-EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
-    Instance *inst = (Instance *)c;
-    if (inst == NULL) return fmi2Error;
-    attach_thread();
+/* fmi2GetReal's body: also called by fmi2GetDirectionalDerivative, directly (a call of the exported
+ * fmi2GetReal could bind through the PLT to another library's global fmi2GetReal, e.g. of an FMU or host
+ * loaded RTLD_GLOBAL before us, which would then get our Instance*; the build links with -Bsymbolic too). */
+static fmi2Status get_real(Instance *inst, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
     inst->direct_error = 0;
     if (inst->fast_on && (n == 0 || (vr != NULL && v != NULL))) {
         size_t i;
@@ -1293,6 +1293,13 @@ EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], si
     }
     inst->slave_error = 0;
     return after_forward(inst, fmi.GetReal(inst->inner, vr, n, v));
+}
+
+EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    return get_real(inst, vr, n, v);
 }
 
 EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {
@@ -1769,7 +1776,7 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
             sources[i * nKnown + j] = table[k][2];
         }
     }
-    status = fmi2GetReal(c, sources, n, partials);  /* the tangent outputs, in one call (the C step's too) */
+    status = get_real(inst, sources, n, partials);  /* the tangent outputs, in one call (the C step's too) */
     if (status <= fmi2Warning) {
         for (i = 0; i < nUnknown; i++) {
             double sum = 0.0;
