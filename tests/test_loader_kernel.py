@@ -302,16 +302,23 @@ def test_switch_turns_the_c_step_off(ball_bearing_fmu, model, tmp_path, capsys):
 
 
 def test_master_run_is_the_same_with_and_without_the_c_step(ball_bearing_fmu, tmp_path):
-    """``python -m mechanism run --revs 0.2 --no-plots --no-ideal``: the same CSV and summary, byte for byte."""
+    """``python -m mechanism run --revs 0.2 --no-plots --no-ideal``: the same CSV and summary, byte for byte; the
+    loader's C step counts (BEARING_FMU_C_STEP_COUNTS) show that it ran, and did not with the switch off."""
     outs = {}
     for switch in ("1", "0"):
         out = tmp_path / f"run_{switch}"
-        env = dict(os.environ, BEARING_FMU_C_STEP=switch, PYTHONPATH=str(ROOT))
+        counts = tmp_path / f"c_steps_{switch}.txt"   # the loader appends each instance's C steps at its free
+        env = dict(os.environ, BEARING_FMU_C_STEP=switch, PYTHONPATH=str(ROOT), BEARING_FMU_C_STEP_COUNTS=str(counts))
         proc = subprocess.run([sys.executable, "-m", "mechanism", "run", "--revs", "0.2", "--no-plots",
                                "--no-ideal", "--quiet", "--fmu", str(ball_bearing_fmu), "--out", str(out)],
                               cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
         assert proc.returncode == 0, proc.stderr
         outs[switch] = out
+        steps = [int(line) for line in counts.read_text().split()] if counts.exists() else []
+        if switch == "1":
+            assert steps and max(steps) > 1000, f"the C step did not run: C steps per instance {steps}"
+        else:
+            assert steps and max(steps) == 0, steps
     names = sorted(p.name for p in outs["1"].iterdir() if not p.name.startswith("."))   # not the lock file
     assert "timeseries.csv" in names
     match, mismatch, errors = filecmp.cmpfiles(outs["1"], outs["0"], names, shallow=False)
@@ -440,19 +447,26 @@ def test_fmu_states_saved_in_c_behave_as_pythonfmus(sides, model, capsys):
         run(a, 5, 8)
         b.free()                                                    # sb's instance is freed
         side.freed = True
-        side.states.pop("sb", None)
+        log("serialize sb after b was freed", _serialized(a, side.states["sb"]))   # used through a
+        log("sb on a after b was freed", a.dll.fmi2SetFMUstate(a.fmu.component, side.states["sb"]))
+        log("step", a.do_step(3.0, 1e-5))                           # the refusal (other n_balls), reported
         log("s3", a.dll.fmi2SetFMUstate(a.fmu.component, side.states["s3"]))
         log("all", a.get_real(everything))
         for key in list(side.states):
-            if key != "sb":
-                log("free", key, side.free_state(a, key))
+            log("free", key, side.free_state(a, key))
         records.append(out)
     assert _states_saved_in_c(sides[0].a) == 3, "s1, s2 and the update of s1 are saved in C"
     assert len(records[0]) == len(records[1])
     for x, y in zip(*records):
         assert x == y
-    refused = [r for r in records[0] if r[0] in ("old s2 on reinitialised a", "step")]
-    assert any(r[-1] for r in refused), "the state of another initialisation must be refused with a message"
+    names = [r[0] for r in records[0]]
+    for refused in ("old s2 on reinitialised a", "sb on a after b was freed"):
+        i = names.index(refused)
+        set_state, step = records[0][i], records[0][i + 1]
+        assert set_state[1] <= 1 and "setFMUstate refused: a state of another instance: n_balls = 8" in set_state[-1]
+        assert step[0] == "step" and step[1] == 2 and "refused: setFMUstate refused" in step[-1]
+    serialized = records[0][names.index("serialize sb after b was freed")]
+    assert serialized[1][0] == OK and b'"n_balls": 8' in serialized[1][1]
 
 
 # --- review findings ----------------------------------------------------------------------------------------

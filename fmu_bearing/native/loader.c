@@ -774,6 +774,14 @@ EXPORT void fmi2FreeInstance(fmi2Component c) {
     attach_thread();
     materialise_all(inst);      /* states saved in C become pythonfmu's before the slave goes */
     disown_all(inst);
+    const char *counts = getenv("BEARING_FMU_C_STEP_COUNTS");   /* tests: a master run's C steps, per instance */
+    if (counts != NULL && counts[0] != '\0') {
+        FILE *file = fopen(counts, "a");
+        if (file != NULL) {
+            fprintf(file, "%lld\n", inst->k_steps);
+            fclose(file);
+        }
+    }
     drop_step(inst);            /* before pythonfmu releases the slave: the callable holds it */
     fmi.FreeInstance(inst->inner);
     remember(inst, 0);
@@ -1455,8 +1463,9 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
  * when the C step does not own the state then, hands it to the slave with one kernel_store -- what the
  * slave's own-state restore (_set_fmu_state of a state it saved since its initialisation) assigns. A CState
  * is "materialised" into pythonfmu's state (kept in ``inner``) whenever pythonfmu must see it: serialisation,
- * a set on another instance, and before its instance is reset or freed; the slave then gets exactly the state
- * pythonfmu would have saved (the owner's state is set to it, saved, and set back). States pythonfmu made
+ * a set on another instance, a restore of life sums that are not finite and >= 0 (the slave refuses it, as
+ * without the C step), and before its instance is reset or freed: the owner's slave builds the state pythonfmu
+ * would have saved from the CState's values without changing itself (materialise). States pythonfmu made
  * (fmi2GetFMUstate while the C step does not own the state, fmi2DeSerializeFMUstate) are pythonfmu's
  * pointers, forwarded as before; the loader tells its CStates apart by its list (no dereference of a
  * pointer it did not make), so foreign or doctored states are checked and refused by the slave as before. */
