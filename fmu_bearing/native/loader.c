@@ -1516,7 +1516,9 @@ static int materialise(CState *s) {
     void *store = NULL, *made = NULL;
     PyGILState_STATE g = py.GILState_Ensure();
     LOCK();
-    if (s->busy) {
+    if (find_locked(s) != s) {   /* freed meanwhile (by another thread) */
+        status = fmi2Error;
+    } else if (s->busy) {
         status = STATE_BUSY;
     } else if (s->has_c && s->inner == NULL) {
         if (s->owner != NULL && s->owner->k_store != NULL) {
