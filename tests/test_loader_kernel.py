@@ -605,6 +605,7 @@ def test_states_saved_in_c_used_on_another_instance_leave_the_owner_alone(ball_b
     to set A's slave to each state to make pythonfmu's state of it)."""
     import struct
     import threading
+    import time
     md, vr, _ = model
     folder = _extract(ball_bearing_fmu, tmp_path / "loader", True)
     a, b = Raw(folder, md, "a"), Raw(folder, md, "b")
@@ -638,6 +639,10 @@ def test_states_saved_in_c_used_on_another_instance_leave_the_owner_alone(ball_b
 
         thread = threading.Thread(target=reader)
         thread.start()
+        for _ in range(1000):   # the reader runs before the serializations start
+            if reads:
+                break
+            time.sleep(0.001)
         sizes = []
         try:
             for _ in range(3):
