@@ -78,7 +78,9 @@ def compile_loader(platform: str, output: Path, table: list[tuple[int, int, int]
                    "-ffp-contract=off", "-fno-fast-math",   # the C step's doubles = Python's (loader.c, "C step")
                    f'-DLOADER_CONFIG="{config.as_posix()}"', "-o", str(output), str(SOURCE)]
         if platform == "linux64":
-            command[4:4] = ["-fPIC", "-fvisibility=hidden", "-s"]
+            # -Bsymbolic: the loader's own calls of its exported functions bind to them, never to a same-named
+            # global symbol of another library (another FMU, the host) loaded before it
+            command[4:4] = ["-fPIC", "-fvisibility=hidden", "-Wl,-Bsymbolic", "-s"]
             command.append("-ldl")
             command.append("-lpthread")
         else:

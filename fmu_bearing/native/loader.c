@@ -774,6 +774,14 @@ EXPORT void fmi2FreeInstance(fmi2Component c) {
     attach_thread();
     materialise_all(inst);      /* states saved in C become pythonfmu's before the slave goes */
     disown_all(inst);
+    const char *counts = getenv("BEARING_FMU_C_STEP_COUNTS");   /* tests: a master run's C steps, per instance */
+    if (counts != NULL && counts[0] != '\0') {
+        FILE *file = fopen(counts, "a");
+        if (file != NULL) {
+            fprintf(file, "%lld\n", inst->k_steps);
+            fclose(file);
+        }
+    }
     drop_step(inst);            /* before pythonfmu releases the slave: the callable holds it */
     fmi.FreeInstance(inst->inner);
     remember(inst, 0);
@@ -851,12 +859,15 @@ static void drop_step(Instance *inst) {
     inst->k_valid = inst->k_dirty = inst->k_retry = 0;   /* the kernel's state dies with the slave */
     if (inst->step != NULL || inst->k_load != NULL) {
         PyGILState_STATE g = py.GILState_Ensure();
-        if (inst->step != NULL) py.DecRef(inst->step);
-        if (inst->queue != NULL) py.DecRef(inst->queue);
-        if (inst->k_load != NULL) py.DecRef(inst->k_load);
-        if (inst->k_store != NULL) py.DecRef(inst->k_store);
-        py.GILState_Release(g);
+        LOCK();   /* k_store: materialise (another thread, GIL held) takes its own reference under LOCK */
+        void *step = inst->step, *queue = inst->queue, *load = inst->k_load, *store = inst->k_store;
         inst->step = inst->queue = inst->k_load = inst->k_store = NULL;
+        UNLOCK();
+        if (step != NULL) py.DecRef(step);
+        if (queue != NULL) py.DecRef(queue);
+        if (load != NULL) py.DecRef(load);
+        if (store != NULL) py.DecRef(store);
+        py.GILState_Release(g);
     }
     free(inst->k.balls);
     free(inst->k.loads);
@@ -908,10 +919,13 @@ EXPORT int bearingLoaderRegisterKernel(void *load, void *store) {
         return 0;
     py.IncRef(load);
     py.IncRef(store);
-    if (inst->k_load != NULL) py.DecRef(inst->k_load);
-    if (inst->k_store != NULL) py.DecRef(inst->k_store);
+    LOCK();   /* (GIL held: the order GIL -> LOCK) */
+    void *old_load = inst->k_load, *old_store = inst->k_store;
     inst->k_load = load;
     inst->k_store = store;
+    UNLOCK();
+    if (old_load != NULL) py.DecRef(old_load);
+    if (old_store != NULL) py.DecRef(old_store);
     inst->k_valid = inst->k_dirty = 0;
     inst->k_retry = 1;
     return 1;
@@ -1000,27 +1014,40 @@ static int kernel_load(Instance *inst) {
     return ok;
 }
 
-/* kernel_store(inputs, cage angle, outputs, life sums, ball loads): 1 on success (takes the GIL) */
-static int store_values(Instance *inst, const double *in, double cage_angle, const double *out, const double *life,
-                        const double *loads) {
-    int n = 6 + K_STATE + inst->k.capacity, i, j = 0, ok = 0;
-    PyGILState_STATE g = py.GILState_Ensure();
-    void *tuple = py.Tuple_New(n), *r = NULL;
-    if (tuple != NULL) {
-        ok = 1;
+/* The tuple kernel_store takes: inputs, cage angle, outputs, life sums, ball loads (GIL held); NULL on failure */
+static void *values_tuple(const double *in, double cage_angle, const double *out, const double *life,
+                          const double *loads, int capacity) {
+    int n = 6 + K_STATE + capacity, i, j = 0, ok = 1;
+    void *tuple = py.Tuple_New(n);
+    if (tuple == NULL) return NULL;
 #define PUT(x)                                                  \
     do {                                                        \
         void *item_ = py.Float_FromDouble(x);                   \
         if (item_ == NULL) ok = 0; else py.Tuple_SetItem(tuple, j, item_); \
         j++;                                                    \
     } while (0)
-        for (i = 0; i < 6; i++) PUT(in[i]);
-        PUT(cage_angle);
-        for (i = 0; i < K_OUTPUTS; i++) PUT(out[i]);
-        for (i = 0; i < K_LIFE; i++) PUT(life[i]);
-        for (i = 0; i < inst->k.capacity; i++) PUT(loads[i]);
+    for (i = 0; i < 6; i++) PUT(in[i]);
+    PUT(cage_angle);
+    for (i = 0; i < K_OUTPUTS; i++) PUT(out[i]);
+    for (i = 0; i < K_LIFE; i++) PUT(life[i]);
+    for (i = 0; i < capacity; i++) PUT(loads[i]);
 #undef PUT
-        if (ok) r = call_python(inst->k_store, tuple);
+    if (!ok) {
+        py.DecRef(tuple);
+        return NULL;
+    }
+    return tuple;
+}
+
+/* kernel_store(inputs, cage angle, outputs, life sums, ball loads): 1 on success (takes the GIL) */
+static int store_values(Instance *inst, const double *in, double cage_angle, const double *out, const double *life,
+                        const double *loads) {
+    int ok;
+    void *r = NULL;
+    PyGILState_STATE g = py.GILState_Ensure();
+    void *tuple = values_tuple(in, cage_angle, out, life, loads, inst->k.capacity);
+    if (tuple != NULL) {
+        r = call_python(inst->k_store, tuple);
         py.DecRef(tuple);
     }
     ok = r != NULL && r != py.None;
@@ -1265,10 +1292,10 @@ EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], si
     return fmi.SetReal(inst->inner, vr, n, v);
 }
 
-EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
-    Instance *inst = (Instance *)c;
-    if (inst == NULL) return fmi2Error;
-    attach_thread();
+/* fmi2GetReal's body: also called by fmi2GetDirectionalDerivative, directly (a call of the exported
+ * fmi2GetReal could bind through the PLT to another library's global fmi2GetReal, e.g. of an FMU or host
+ * loaded RTLD_GLOBAL before us, which would then get our Instance*; the build links with -Bsymbolic too). */
+static fmi2Status get_real(Instance *inst, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
     inst->direct_error = 0;
     if (inst->fast_on && (n == 0 || (vr != NULL && v != NULL))) {
         size_t i;
@@ -1293,6 +1320,13 @@ EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], si
     }
     inst->slave_error = 0;
     return after_forward(inst, fmi.GetReal(inst->inner, vr, n, v));
+}
+
+EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL) return fmi2Error;
+    attach_thread();
+    return get_real(inst, vr, n, v);
 }
 
 EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {
@@ -1429,8 +1463,9 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
  * when the C step does not own the state then, hands it to the slave with one kernel_store -- what the
  * slave's own-state restore (_set_fmu_state of a state it saved since its initialisation) assigns. A CState
  * is "materialised" into pythonfmu's state (kept in ``inner``) whenever pythonfmu must see it: serialisation,
- * a set on another instance, and before its instance is reset or freed; the slave then gets exactly the state
- * pythonfmu would have saved (the owner's state is set to it, saved, and set back). States pythonfmu made
+ * a set on another instance, a restore of life sums that are not finite and >= 0 (the slave refuses it, as
+ * without the C step), and before its instance is reset or freed: the owner's slave builds the state pythonfmu
+ * would have saved from the CState's values without changing itself (materialise). States pythonfmu made
  * (fmi2GetFMUstate while the C step does not own the state, fmi2DeSerializeFMUstate) are pythonfmu's
  * pointers, forwarded as before; the loader tells its CStates apart by its list (no dereference of a
  * pointer it did not make), so foreign or doctored states are checked and refused by the slave as before. */
@@ -1439,62 +1474,99 @@ typedef struct CState {
     Instance *owner;                    /* the instance that saved it (NULL: freed; then ``inner`` is set) */
     fmi2FMUstate inner;                 /* pythonfmu's state of the same content, or NULL (not materialised) */
     int has_c;                          /* the values below are the state (not yet materialised) */
+    int busy;                           /* being materialised by a thread (its values in use, outside LOCK) */
+    int capacity;                       /* length of loads */
     double in_val[6], cage_angle, out[K_OUTPUTS], life[K_LIFE];
     double *loads;
 } CState;
-static CState *cstates;                 /* every live CState (under LOCK) */
+static CState *cstates;                 /* every live CState; its fields are read and changed under LOCK */
+
+/* Under LOCK: the CState at p, or NULL (no dereference of a pointer the loader did not make) */
+static CState *find_locked(const void *p) {
+    CState *s;
+    for (s = cstates; s != NULL && (const void *)s != p; s = s->next) {}
+    return s;
+}
 
 static CState *find_cstate(const void *p) {
-    CState *s;
     LOCK();
-    for (s = cstates; s != NULL && (const void *)s != p; s = s->next) {}
+    CState *s = find_locked(p);
     UNLOCK();
     return s;
 }
 
-static void unlink_cstate(CState *state) {
+/* 1 if the life sums can be restored (finite, >= 0: what LifeAccumulator.restore accepts) */
+static int life_ok(const double *life) {
+    for (int i = 0; i < K_LIFE; i++)
+        if (!(life[i] >= 0.0) || !isfinite(life[i])) return 0;
+    return 1;
+}
+
+#define STATE_BUSY 99   /* materialise: another thread is materialising the state now */
+
+/* Make pythonfmu's state of a CState: the owner's slave builds it from the saved values
+ * (kernel_store(values, True) = _kernel_saved_state: pythonfmu 0.7's fmi2FMUstate is the PyObject its
+ * _get_fmu_state returns) WITHOUT changing the owner's slave, so a thread using the owner meanwhile sees
+ * nothing of it. The GIL is taken before LOCK (the order of the Python side's calls into the loader) and no
+ * Python runs under LOCK; ``busy`` keeps the state's values for this thread while the slave builds it; the
+ * callable is held by its own reference (the owner may be freed meanwhile: drop_step clears it under LOCK).
+ * fmi2OK, STATE_BUSY, or fmi2Error (owner freed before, or a Python failure). */
+static int materialise(CState *s) {
+    int status = fmi2OK;
+    void *store = NULL, *made = NULL;
+    PyGILState_STATE g = py.GILState_Ensure();
     LOCK();
-    for (CState **p = &cstates; *p != NULL; p = &(*p)->next)
-        if (*p == state) {
-            *p = state->next;
-            break;
-        }
-    UNLOCK();
-}
-
-/* Make pythonfmu's state of a CState (owner alive): the owner's slave is set to it, saved, and set back. */
-static fmi2Status materialise(CState *state) {
-    Instance *o = state->owner;
-    fmi2FMUstate current = NULL, made = NULL;
-    if (!state->has_c || state->inner != NULL) return fmi2OK;
-    if (o == NULL) return fmi2Error;
-    fmi2Status status = before_forward(o, 0);   /* the slave as the C step left it */
-    if (status <= fmi2Warning) status = fmi.GetFMUstate(o->inner, &current);
-    if (status > fmi2Warning) return status;
-    if (!store_values(o, state->in_val, state->cage_angle, state->out, state->life, state->loads)) {
+    if (find_locked(s) != s) {   /* freed meanwhile (by another thread) */
         status = fmi2Error;
-    } else {
-        status = fmi.GetFMUstate(o->inner, &made);
+    } else if (s->busy) {
+        status = STATE_BUSY;
+    } else if (s->has_c && s->inner == NULL) {
+        if (s->owner != NULL && s->owner->k_store != NULL) {
+            store = s->owner->k_store;
+            py.IncRef(store);
+            s->busy = 1;
+        } else {
+            status = fmi2Error;
+        }
     }
-    fmi2Status back = fmi.SetFMUstate(o->inner, current);   /* the owner's own state: as it was */
-    fmi.FreeFMUstate(o->inner, &current);
-    if (back > fmi2Warning) {
-        o->in_valid = o->out_valid = o->k_valid = 0;
-        o->k_retry = o->k_load != NULL;
-        if (status <= fmi2Warning) status = back;
+    UNLOCK();
+    if (store != NULL) {
+        void *values = values_tuple(s->in_val, s->cage_angle, s->out, s->life, s->loads, s->capacity);
+        void *flag = values != NULL ? py.Float_FromDouble(1.0) : NULL;
+        void *args = flag != NULL ? py.Tuple_New(2) : NULL;
+        if (args != NULL) {
+            py.Tuple_SetItem(args, 0, values);   /* steals */
+            py.Tuple_SetItem(args, 1, flag);
+            values = flag = NULL;
+            made = py.Object_Call(store, args, NULL);
+            py.DecRef(args);
+        }
+        if (values != NULL) py.DecRef(values);
+        if (flag != NULL) py.DecRef(flag);
+        if (made == py.None) {
+            py.DecRef(made);
+            made = NULL;
+        }
+        if (py.Err_Occurred() != NULL) py.Err_Clear();
+        py.DecRef(store);
+        double *loads = NULL;
+        LOCK();
+        s->busy = 0;
+        if (made != NULL) {
+            s->inner = (fmi2FMUstate)made;
+            s->has_c = 0;
+            loads = s->loads;
+            s->loads = NULL;
+        }
+        UNLOCK();
+        free(loads);
+        if (made == NULL) status = fmi2Error;
     }
-    if (status <= fmi2Warning && made != NULL) {
-        state->inner = made;
-        state->has_c = 0;
-        free(state->loads);
-        state->loads = NULL;
-        return status;
-    }
-    if (made != NULL) fmi.FreeFMUstate(o->inner, &made);
-    return status > fmi2Warning ? status : fmi2Error;
+    py.GILState_Release(g);
+    return status;
 }
 
-/* Before an instance is reset or freed: its CStates become pythonfmu's states. */
+/* Before an instance is reset or freed: its CStates become pythonfmu's states (the slave is still there). */
 static void materialise_all(Instance *inst) {
     CState *s, *mine[64];
     int n, i, more = 1;
@@ -1503,14 +1575,16 @@ static void materialise_all(Instance *inst) {
         more = 0;
         LOCK();
         for (s = cstates; s != NULL; s = s->next)
-            if (s->owner == inst) {
-                if (s->has_c && n == 64) more = 1;
-                else if (s->has_c) mine[n++] = s;
+            if (s->owner == inst && s->has_c && !s->busy) {   /* busy: another thread is making it */
+                if (n == 64) more = 1;
+                else mine[n++] = s;
             }
         UNLOCK();
         for (i = 0; i < n; i++)
-            if (materialise(mine[i]) > fmi2Warning) {
-                mine[i]->has_c = 0;   /* cannot be made: any later use is refused (fmi2Error) */
+            if (materialise(mine[i]) == fmi2Error) {
+                LOCK();
+                if (!mine[i]->busy) mine[i]->has_c = 0;   /* cannot be made: any later use is refused (fmi2Error) */
+                UNLOCK();
             }
     }
 }
@@ -1522,34 +1596,68 @@ static void disown_all(Instance *inst) {
     UNLOCK();
 }
 
+/* pythonfmu's state of CState s (materialised first), with a reference of the caller's own (GIL taken here,
+   released by release_inner), so a concurrent update or free of s cannot free it under the caller; NULL if
+   it cannot be made (``*status`` says why). */
+static void *acquire_inner(CState *s, fmi2Status *status, PyGILState_STATE *g) {
+    int made = materialise(s);
+    void *inner = NULL;
+    *g = py.GILState_Ensure();
+    if (made == fmi2OK) {
+        LOCK();
+        if (find_locked(s) == s && s->inner != NULL) {
+            inner = s->inner;
+            py.IncRef(inner);
+        }
+        UNLOCK();
+    }
+    *status = inner != NULL ? fmi2OK : fmi2Error;
+    if (inner == NULL) py.GILState_Release(*g);
+    return inner;
+}
+
+static void release_inner(void *inner, PyGILState_STATE g) {
+    py.DecRef(inner);
+    py.GILState_Release(g);
+}
+
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state) {
     Instance *inst = (Instance *)c;
     if (inst == NULL || state == NULL) return fmi2Error;
     attach_thread();
     inst->direct_error = 0;
     CState *s = *state != NULL ? find_cstate(*state) : NULL;
+    fmi2FMUstate old = NULL;
     if (inst->fast_on && inst->k_valid && (*state == NULL || s != NULL)) {   /* the C step owns the state */
+        int capacity = inst->k.capacity;
         if (s == NULL) {
             s = (CState *)calloc(1, sizeof *s);
-            double *loads = (double *)malloc((size_t)inst->k.capacity * sizeof(double));
+            double *loads = (double *)malloc((size_t)capacity * sizeof(double));
             if (s == NULL || loads == NULL) {
                 free(s);
                 free(loads);
                 return fmi2Error;
             }
             s->loads = loads;
+            s->capacity = capacity;
             LOCK();
-            s->next = cstates;
-            cstates = s;
-            UNLOCK();
         } else {   /* FMI: *state is a state saved earlier: update it */
-            if (s->inner != NULL) fmi.FreeFMUstate(inst->inner, &s->inner);
-            s->inner = NULL;
-            if (s->loads == NULL || s->owner != inst) {
-                double *loads = (double *)realloc(s->loads, (size_t)inst->k.capacity * sizeof(double));
-                if (loads == NULL) return fmi2Error;
-                s->loads = loads;
+            LOCK();
+            if (find_locked(s) != s || s->busy) {   /* freed meanwhile, or being made by another thread */
+                UNLOCK();
+                return fmi2Error;
             }
+            if (s->loads == NULL || s->capacity != capacity) {
+                double *loads = (double *)realloc(s->loads, (size_t)capacity * sizeof(double));
+                if (loads == NULL) {
+                    UNLOCK();
+                    return fmi2Error;
+                }
+                s->loads = loads;
+                s->capacity = capacity;
+            }
+            old = s->inner;
+            s->inner = NULL;
         }
         s->owner = inst;
         s->has_c = 1;
@@ -1557,7 +1665,13 @@ EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state) {
         s->cage_angle = inst->k.cage_angle;
         memcpy(s->out, inst->k.out, sizeof s->out);
         memcpy(s->life, inst->k.life, sizeof s->life);
-        memcpy(s->loads, inst->k.loads, (size_t)inst->k.capacity * sizeof(double));
+        memcpy(s->loads, inst->k.loads, (size_t)capacity * sizeof(double));
+        if (*state == NULL) {
+            s->next = cstates;
+            cstates = s;
+        }
+        UNLOCK();
+        if (old != NULL) fmi.FreeFMUstate(inst->inner, &old);
         inst->k_states++;
         *state = s;
         return fmi2OK;
@@ -1569,12 +1683,22 @@ EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state) {
     fmi2FMUstate made = NULL;
     status = fmi.GetFMUstate(inst->inner, &made);
     if (status > fmi2Warning) return status;
-    if (s->inner != NULL) fmi.FreeFMUstate(inst->inner, &s->inner);
-    free(s->loads);
+    double *loads = NULL;
+    LOCK();
+    if (find_locked(s) != s || s->busy) {
+        UNLOCK();
+        fmi.FreeFMUstate(inst->inner, &made);
+        return fmi2Error;
+    }
+    old = s->inner;
+    loads = s->loads;
     s->loads = NULL;
     s->inner = made;
     s->has_c = 0;
     s->owner = inst;
+    UNLOCK();
+    free(loads);
+    if (old != NULL) fmi.FreeFMUstate(inst->inner, &old);
     return status;
 }
 
@@ -1584,29 +1708,57 @@ EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
     attach_thread();
     inst->direct_error = 0;
     CState *s = state != NULL ? find_cstate(state) : NULL;
-    if (s != NULL && s->has_c && s->owner == inst) {
-        if (inst->fast_on && inst->k_valid) {   /* back into the kernel; the slave gets it at the next push */
-            memcpy(inst->in_val, s->in_val, sizeof s->in_val);
-            inst->k.cage_angle = s->cage_angle;
-            memcpy(inst->k.out, s->out, sizeof s->out);
-            memcpy(inst->k.life, s->life, sizeof s->life);
-            memcpy(inst->k.loads, s->loads, (size_t)inst->k.capacity * sizeof(double));
-            inst->in_valid = 1;
-            inst->in_dirty = 0;
-            inst->out_valid = 0;
-            inst->k_dirty = 1;
-            return fmi2OK;
-        }
-        fmi2Status status = before_forward(inst, 1);
-        if (status > fmi2Warning) return status;
-        if (!store_values(inst, s->in_val, s->cage_angle, s->out, s->life, s->loads)) return fmi2Error;
-        inst->in_dirty = 0;
-        return fmi2OK;
-    }
     if (s != NULL) {
-        fmi2Status status = materialise(s);   /* another instance's: pythonfmu's state, the slave checks it */
-        if (status > fmi2Warning || s->inner == NULL) return status > fmi2Warning ? status : fmi2Error;
-        state = s->inner;
+        /* this instance's own state, with usable life sums (else the slave checks it and refuses, see below) */
+        int own = 0;
+        LOCK();
+        if (find_locked(s) == s && !s->busy && s->has_c && s->owner == inst && s->capacity == inst->k.capacity &&
+            (!inst->k.life_on || life_ok(s->life))) {
+            own = 1;
+            if (inst->fast_on && inst->k_valid) {   /* back into the kernel; the slave gets it at the next push */
+                memcpy(inst->in_val, s->in_val, sizeof s->in_val);
+                inst->k.cage_angle = s->cage_angle;
+                memcpy(inst->k.out, s->out, sizeof s->out);
+                memcpy(inst->k.life, s->life, sizeof s->life);
+                memcpy(inst->k.loads, s->loads, (size_t)s->capacity * sizeof(double));
+                UNLOCK();
+                inst->in_valid = 1;
+                inst->in_dirty = 0;
+                inst->out_valid = 0;
+                inst->k_dirty = 1;
+                return fmi2OK;
+            }
+        }
+        UNLOCK();
+        if (own) {   /* the slave has the state now: one kernel_store (values copied: s may change meanwhile) */
+            CState copy;
+            memset(&copy, 0, sizeof copy);
+            double *loads = (double *)malloc((size_t)inst->k.capacity * sizeof(double));
+            if (loads == NULL) return fmi2Error;
+            LOCK();
+            own = find_locked(s) == s && !s->busy && s->has_c && s->owner == inst && s->capacity == inst->k.capacity;
+            if (own) {
+                copy = *s;
+                memcpy(loads, s->loads, (size_t)s->capacity * sizeof(double));
+            }
+            UNLOCK();
+            fmi2Status status = own ? before_forward(inst, 1) : fmi2Error;
+            if (status <= fmi2Warning &&
+                !store_values(inst, copy.in_val, copy.cage_angle, copy.out, copy.life, loads))
+                status = fmi2Error;
+            free(loads);
+            if (status <= fmi2Warning) inst->in_dirty = 0;
+            return status;
+        }
+        /* another instance's (or unusable sums): pythonfmu's state, which the slave checks */
+        fmi2Status status;
+        PyGILState_STATE g;
+        void *inner = acquire_inner(s, &status, &g);
+        if (inner == NULL) return status;
+        status = before_forward(inst, 1);
+        if (status <= fmi2Warning) status = fmi.SetFMUstate(inst->inner, inner);
+        release_inner(inner, g);
+        return status;
     }
     fmi2Status flushed = before_forward(inst, 1);
     if (flushed > fmi2Warning) return flushed;
@@ -1618,9 +1770,21 @@ EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state) {
     if (inst == NULL || state == NULL) return fmi2Error;
     attach_thread();
     inst->direct_error = 0;
-    CState *s = *state != NULL ? find_cstate(*state) : NULL;
+    if (*state == NULL) return fmi.FreeFMUstate(inst->inner, state);
+    LOCK();
+    CState *s = find_locked(*state);
+    if (s != NULL && s->busy) {   /* another thread is making it now: not freed (FMI: a state is not shared) */
+        UNLOCK();
+        return fmi2Error;
+    }
+    if (s != NULL)
+        for (CState **p = &cstates; *p != NULL; p = &(*p)->next)
+            if (*p == s) {
+                *p = s->next;
+                break;
+            }
+    UNLOCK();
     if (s == NULL) return fmi.FreeFMUstate(inst->inner, state);
-    unlink_cstate(s);
     fmi2Status status = fmi2OK;
     if (s->inner != NULL) status = fmi.FreeFMUstate(inst->inner, &s->inner);
     free(s->loads);
@@ -1629,37 +1793,38 @@ EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state) {
     return status;
 }
 
-/* pythonfmu's state for a serialisation call (a CState is materialised first); NULL on failure */
-static fmi2FMUstate serializable(Instance *inst, fmi2FMUstate state, fmi2Status *status) {
-    CState *s = state != NULL ? find_cstate(state) : NULL;
-    *status = before_forward(inst, 0);
-    if (s == NULL || *status > fmi2Warning) return state;
-    *status = materialise(s);
-    return s->inner;
-}
-
 EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size) {
     Instance *inst = (Instance *)c;
-    fmi2Status status;
     if (inst == NULL) return fmi2Error;
     attach_thread();
     inst->direct_error = 0;
-    fmi2FMUstate inner = serializable(inst, state, &status);
+    fmi2Status status = before_forward(inst, 0);
     if (status > fmi2Warning) return status;
-    if (inner == NULL && state != NULL) return fmi2Error;
-    return fmi.SerializedFMUstateSize(inst->inner, inner, size);
+    CState *s = state != NULL ? find_cstate(state) : NULL;
+    if (s == NULL) return fmi.SerializedFMUstateSize(inst->inner, state, size);
+    PyGILState_STATE g;
+    void *inner = acquire_inner(s, &status, &g);
+    if (inner == NULL) return status;
+    status = fmi.SerializedFMUstateSize(inst->inner, inner, size);
+    release_inner(inner, g);
+    return status;
 }
 
 EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
     Instance *inst = (Instance *)c;
-    fmi2Status status;
     if (inst == NULL) return fmi2Error;
     attach_thread();
     inst->direct_error = 0;
-    fmi2FMUstate inner = serializable(inst, state, &status);
+    fmi2Status status = before_forward(inst, 0);
     if (status > fmi2Warning) return status;
-    if (inner == NULL && state != NULL) return fmi2Error;
-    return fmi.SerializeFMUstate(inst->inner, inner, bytes, size);
+    CState *s = state != NULL ? find_cstate(state) : NULL;
+    if (s == NULL) return fmi.SerializeFMUstate(inst->inner, state, bytes, size);
+    PyGILState_STATE g;
+    void *inner = acquire_inner(s, &status, &g);
+    if (inner == NULL) return status;
+    status = fmi.SerializeFMUstate(inst->inner, inner, bytes, size);
+    release_inner(inner, g);
+    return status;
 }
 
 /* For tests and benchmarks: the number of FMU states ``c`` saved in C. */
@@ -1769,7 +1934,7 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
             sources[i * nKnown + j] = table[k][2];
         }
     }
-    status = fmi2GetReal(c, sources, n, partials);  /* the tangent outputs, in one call (the C step's too) */
+    status = get_real(inst, sources, n, partials);  /* the tangent outputs, in one call (the C step's too) */
     if (status <= fmi2Warning) {
         for (i = 0; i < nUnknown; i++) {
             double sum = 0.0;

@@ -19,6 +19,7 @@ This file is the FMU's slave module: pythonfmu's binary imports it as a top-leve
 the slave class by matching its source lines against a class statement deriving from Fmi2Slave, so
 it uses absolute imports only and no ``from __future__`` import.
 """
+import copy
 import ctypes
 from dataclasses import fields
 from functools import partial
@@ -270,6 +271,9 @@ class BallBearing(Fmi2Slave, BearingStepping):
             bearing = physics.BallBearing(self.parameters(), self.capacity)  # validates, names the parameter
             accumulator = self._new_life(bearing.params)
             bearing.check_inputs(self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer)
+            # evaluate writes the first n_balls loads only: the rest (a failed earlier initialisation with more
+            # balls may have left values there) are 0, as ball_load_k's description says, once initialised
+            self._scratch[:] = [0.0] * len(self._scratch)
             message = self._evaluate(float(bearing.params.cage_angle_start), bearing)
             if message is not None:
                 raise FloatingPointError(message)
@@ -331,9 +335,12 @@ class BallBearing(Fmi2Slave, BearingStepping):
         except Exception:   # never let an exception reach the loader: the Python step then
             return None
 
-    def _kernel_store(self, values):
+    def _kernel_store(self, values, saved_state=False):
         """Take the C step's state (inputs, cage_angle, the 10 BearingForce outputs, life sums, ball loads): the
-        slave is then as the Python step would have left it. True, or None on failure (the loader reports it)."""
+        slave is then as the Python step would have left it. True, or None on failure (the loader reports it).
+        ``saved_state`` true: change nothing, return ``_kernel_saved_state(values)``."""
+        if saved_state:
+            return self._kernel_saved_state(values)
         try:
             (self.e_x, self.e_y, self.v_x, self.v_y, self.omega_inner, self.omega_outer,
              self.cage_angle) = values[:7]
@@ -347,6 +354,33 @@ class BallBearing(Fmi2Slave, BearingStepping):
                 acc.sum_cubed_inner, acc.sum_cubed_outer, acc.revolutions, acc.time = values[17:21]
             self._loads[:] = values[21:]   # (not _scratch: evaluate rewrites its first n_balls, never the rest)
             return True
+        except Exception:
+            return None
+
+    def _kernel_saved_state(self, values):
+        """The ``_SavedState`` that ``_get_fmu_state`` would return after ``_kernel_store(values)``, made without
+        changing this slave (the loader's state saved in C, handed to pythonfmu: loader.c, "FMU states in C"):
+        the parameters and ratings are this instance's current ones (fixed once initialised; the loader makes
+        its states pythonfmu's before a reset), the rest comes from ``values``. pythonfmu 0.7's fmi2FMUstate is
+        the object ``_get_fmu_state`` returns, so the loader uses the returned object as one. None on failure."""
+        try:
+            state = _SavedState((var.name, var.getter()) for var in self.vars.values())
+            state.bearing = self._bearing
+            for (name, _, _), value in zip(INPUTS, values[:6]):
+                state[name] = value
+            state[CAGE_ANGLE[0]] = values[6]
+            f = values[7:17]
+            for (name, _, _), value in zip(FORCE_OUTPUTS, physics.BearingForce(*f[:8], int(f[8]), f[9])):
+                state[name] = value
+            for k, value in enumerate(values[21:]):
+                state[f"ball_load_{k + 1}"] = value
+            if self._life is not None:
+                acc = copy.copy(self._life)
+                acc.sum_cubed_inner, acc.sum_cubed_outer, acc.revolutions, acc.time = values[17:21]
+                state[LIFE_STATE] = acc.state()
+                for name, _, _, prop in LIFE_OUTPUTS:
+                    state[name] = float(getattr(acc, prop))
+            return state
         except Exception:
             return None
 
@@ -432,6 +466,9 @@ class BallBearing(Fmi2Slave, BearingStepping):
             # this instance's own in-memory state, saved since initialisation (the iterated and adaptive
             # masters' rollback, once per step): its values can only be the instance's own valid ones
             own = type(state) is _SavedState and state.bearing is not None and state.bearing is self._bearing
+            if own and self._life is not None:
+                # its life sums may still be unusable (inf after an overflowing load): checked like any state's
+                life.LifeAccumulator(self._life.ratings).restore(state.get(LIFE_STATE) or [])
             problem = None if own else self._state_problem(state)
         except Exception as err:  # no exception may reach pythonfmu's C++ side
             problem = f"not a BallBearing state ({err!r})"
