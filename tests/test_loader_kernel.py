@@ -274,13 +274,18 @@ def test_oil_film_keeps_the_python_step(pair, model, capsys):
     _, vr, variables = model
     rng = random.Random(3)
     pair.start(_inputs(rng), ints=[(vr["damping_model"], 2)])
+    _fifty_steps_alike(pair, capsys, rng, vr, variables)
+    assert pair.kernel_steps() == 0
+
+
+def _fifty_steps_alike(pair, capsys, rng, vr, variables):
+    """50 random set/step/get cycles on both sides of ``pair``, every status and value the same."""
     ins, everything = [vr[n] for n in INPUTS], _real_vrs(variables)
     for i in range(50):
         u = _inputs(rng)
         _same(pair, capsys, lambda f: f.set_real(ins, u))
         assert _same(pair, capsys, lambda f: f.do_step(i * 1e-5, 1e-5)) == OK
         _same(pair, capsys, lambda f: f.get_real(everything))
-    assert pair.kernel_steps() == 0
 
 
 def test_switch_turns_the_c_step_off(ball_bearing_fmu, model, tmp_path, capsys):
@@ -290,12 +295,7 @@ def test_switch_turns_the_c_step_off(ball_bearing_fmu, model, tmp_path, capsys):
     try:
         rng = random.Random(4)
         pair.start(_inputs(rng))
-        ins, everything = [vr[n] for n in INPUTS], _real_vrs(variables)
-        for i in range(50):
-            u = _inputs(rng)
-            _same(pair, capsys, lambda f: f.set_real(ins, u))
-            assert _same(pair, capsys, lambda f: f.do_step(i * 1e-5, 1e-5)) == OK
-        _same(pair, capsys, lambda f: f.get_real(everything))
+        _fifty_steps_alike(pair, capsys, rng, vr, variables)
         assert pair.kernel_steps() == 0
     finally:
         pair.free()

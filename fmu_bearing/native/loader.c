@@ -839,18 +839,22 @@ EXPORT int bearingLoaderRegisterStep(void *step, void *queue, const fmi2ValueRef
     return 1;
 }
 
-/* For tests: 1 if the fast path serves ``c`` (one of this loader's live instances) now, else 0. */
-EXPORT int bearingLoaderFastPathOn(const void *c) {
-    int on = 0;
+/* For the test and benchmark counters below: field ``which`` (0 fast_on, 1 k_steps, 2 k_states) of ``c`` if it
+   is one of this loader's live instances, else ``missing``. */
+static long long live_counter(const void *c, int which, long long missing) {
+    long long n = missing;
     LOCK();
     for (int i = 0; i < MAX_LIVE; i++)
         if (c != NULL && live[i] == (const Instance *)c) {
-            on = live[i]->fast_on;
+            n = which == 0 ? live[i]->fast_on : which == 1 ? live[i]->k_steps : live[i]->k_states;
             break;
         }
     UNLOCK();
-    return on;
+    return n;
 }
+
+/* For tests: 1 if the fast path serves ``c`` (one of this loader's live instances) now, else 0. */
+EXPORT int bearingLoaderFastPathOn(const void *c) { return (int)live_counter(c, 0, 0); }
 
 /* Switch the fast path off and release the callable (takes the GIL). */
 static void drop_step(Instance *inst) {
@@ -933,17 +937,7 @@ EXPORT int bearingLoaderRegisterKernel(void *load, void *store) {
 }
 
 /* For tests and benchmarks: the number of steps ``c`` (one of this loader's live instances) did in C. */
-EXPORT long long bearingLoaderKernelSteps(const void *c) {
-    long long n = -1;
-    LOCK();
-    for (int i = 0; i < MAX_LIVE; i++)
-        if (c != NULL && live[i] == (const Instance *)c) {
-            n = live[i]->k_steps;
-            break;
-        }
-    UNLOCK();
-    return n;
-}
+EXPORT long long bearingLoaderKernelSteps(const void *c) { return live_counter(c, 1, -1); }
 
 /* callable(arg) or callable() (arg NULL); a new reference or NULL (GIL held) */
 static void *call_python(void *callable, void *arg) {
@@ -1828,17 +1822,7 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
 }
 
 /* For tests and benchmarks: the number of FMU states ``c`` saved in C. */
-EXPORT long long bearingLoaderKernelStates(const void *c) {
-    long long n = -1;
-    LOCK();
-    for (int i = 0; i < MAX_LIVE; i++)
-        if (c != NULL && live[i] == (const Instance *)c) {
-            n = live[i]->k_states;
-            break;
-        }
-    UNLOCK();
-    return n;
-}
+EXPORT long long bearingLoaderKernelStates(const void *c) { return live_counter(c, 2, -1); }
 
 EXPORT fmi2Status fmi2Terminate(fmi2Component c) {
     Instance *inst = (Instance *)c;
