@@ -1787,7 +1787,10 @@ EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state) {
     return status;
 }
 
-EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size) {
+/* fmi2SerializedFMUstateSize (``only_size``: the size into ``*size_out``) or fmi2SerializeFMUstate: a state saved
+   in C is serialized as pythonfmu's state made from it (the same bytes as without the C step). */
+static fmi2Status serialize(fmi2Component c, fmi2FMUstate state, int only_size, fmi2Byte bytes[], size_t size,
+                            size_t *size_out) {
     Instance *inst = (Instance *)c;
     if (inst == NULL) return fmi2Error;
     attach_thread();
@@ -1795,30 +1798,21 @@ EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state
     fmi2Status status = before_forward(inst, 0);
     if (status > fmi2Warning) return status;
     CState *s = state != NULL ? find_cstate(state) : NULL;
-    if (s == NULL) return fmi.SerializedFMUstateSize(inst->inner, state, size);
     PyGILState_STATE g;
-    void *inner = acquire_inner(s, &status, &g);
-    if (inner == NULL) return status;
-    status = fmi.SerializedFMUstateSize(inst->inner, inner, size);
-    release_inner(inner, g);
+    void *inner = state;
+    if (s != NULL && (inner = acquire_inner(s, &status, &g)) == NULL) return status;
+    status = only_size ? fmi.SerializedFMUstateSize(inst->inner, inner, size_out)
+                           : fmi.SerializeFMUstate(inst->inner, inner, bytes, size);
+    if (s != NULL) release_inner(inner, g);
     return status;
 }
 
+EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size) {
+    return serialize(c, state, 1, NULL, 0, size);
+}
+
 EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
-    Instance *inst = (Instance *)c;
-    if (inst == NULL) return fmi2Error;
-    attach_thread();
-    inst->direct_error = 0;
-    fmi2Status status = before_forward(inst, 0);
-    if (status > fmi2Warning) return status;
-    CState *s = state != NULL ? find_cstate(state) : NULL;
-    if (s == NULL) return fmi.SerializeFMUstate(inst->inner, state, bytes, size);
-    PyGILState_STATE g;
-    void *inner = acquire_inner(s, &status, &g);
-    if (inner == NULL) return status;
-    status = fmi.SerializeFMUstate(inst->inner, inner, bytes, size);
-    release_inner(inner, g);
-    return status;
+    return serialize(c, state, 0, bytes, size, NULL);
 }
 
 /* For tests and benchmarks: the number of FMU states ``c`` saved in C. */
