@@ -196,6 +196,26 @@ def test_bad_arguments_call_nothing(endpoint):
     assert fmu_native.get_state(H) == (fmu_native.NO_FUNCTION, 0)
 
 
+def test_native_samples_equal_the_endpoints(endpoint):
+    """endpoint_references: native exchange with its coupling references, then the sampled outputs natively
+    equal ``FmuEndpoint.sample()`` (its names' order)."""
+    H, refs = fmu_native.endpoint_handle(endpoint), fmu_native.endpoint_references(endpoint)
+    assert [endpoint.variables[n].valueReference for n in JOINT_INPUT_NAMES] == refs.inputs.tolist()
+    assert len(refs.real_samples) + len(refs.int_samples) + len(refs.bool_samples) == len(endpoint.sample_names)
+    out = np.zeros(len(refs.coupling))
+    assert fmu_native.exchange(H, refs.inputs, np.array([6e-5, -2e-5, 0.01, 0.0, -52.0, 125.0]), 0.0, H_STEP,
+                               refs.coupling, out) == 0
+    real, integer = np.zeros(len(refs.real_samples)), np.zeros(len(refs.int_samples), np.int32)
+    boolean = np.zeros(len(refs.bool_samples), np.int32)
+    assert fmu_native.get_reals(H, refs.real_samples, real) == 0
+    assert fmu_native.get_integers(H, refs.int_samples, integer) == 0
+    assert fmu_native.get_booleans(H, refs.bool_samples, boolean) == 0
+    expected = endpoint.sample()
+    assert [*real, *map(float, integer), *map(float, boolean)] == expected
+    assert integer[0] > 0 and max(real) > 0                      # loaded balls: in the load zone
+    np.testing.assert_array_equal(out, endpoint.fmu.getReal(refs.coupling.tolist()))
+
+
 def test_booleans(ball_bearing_fmu):
     ep = FmuEndpoint(ball_bearing_fmu, {"allow_ball_overlap": True})
     try:

@@ -27,6 +27,7 @@ component pointer would dangle. ``invalidate(H)`` zeroes the slots: every call t
 from __future__ import annotations
 
 import ctypes
+from typing import NamedTuple
 
 import numpy as np
 from llvmlite import ir
@@ -275,6 +276,28 @@ def endpoint_handle(endpoint) -> np.ndarray:
     if not getattr(endpoint, "_instantiated", False):
         raise ValueError("the endpoint is not initialised (call initialize first) or already closed")
     return handle(endpoint.fmu, endpoint)
+
+
+class References(NamedTuple):
+    """An FmuEndpoint's value references as uint32 arrays for the native calls (its own order)."""
+
+    inputs: np.ndarray        #: the six joint inputs (``endpoints.INPUTS``)
+    coupling: np.ndarray      #: the coupling outputs (``endpoint.coupling_names``: F_x, F_y, stiffness, damping)
+    real_samples: np.ndarray  #: the sampled outputs of ``endpoint.sample_names``: reals first,
+    int_samples: np.ndarray   #: then integers,
+    bool_samples: np.ndarray  #: then booleans (``FmuEndpoint.sample``'s order)
+
+
+def endpoint_references(endpoint) -> References:
+    """The value references an ``FmuEndpoint`` exchanges and samples, for ``exchange``/``get_*``.
+
+    Sampling natively (``get_reals``/``get_integers``/``get_booleans`` of these) gives ``endpoint.sample()``'s
+    values; after native calls do not rely on the endpoint's own ``exchange_sampled`` buffer (it does not
+    see them)."""
+    def vrs(ctypes_array) -> np.ndarray:
+        return np.array(list(ctypes_array), dtype=np.uint32)
+    return References(vrs(endpoint._vr_in), vrs(endpoint._vr_out), vrs(endpoint._vr_sr), vrs(endpoint._vr_si),
+                      vrs(endpoint._vr_sb))
 
 
 def invalidate(H: np.ndarray) -> None:
