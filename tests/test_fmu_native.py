@@ -28,6 +28,7 @@ from mechanism.cosim.endpoints import ExchangeError, FmuEndpoint
 ROOT = Path(__file__).resolve().parent.parent
 H_STEP = 1e-5
 START = (3e-5, 0.0, 0.0, 0.0, -52.0, 125.0)
+SHORT = fmu_native.SLOTS - 1
 
 
 @njit
@@ -191,6 +192,7 @@ def test_bad_arguments_call_nothing(endpoint):
     with pytest.raises(TypingError, match="fmi2Integer"):
         fmu_native.get_integers(H, _vrs(endpoint, ["loaded_balls"]), np.zeros(1))
     assert fmu_native.exchange(H, vr_in, u, 0.0, H_STEP, vr_out, out) == 0
+    assert fmu_native.do_step(H[:SHORT], 0.0, H_STEP) == fmu_native.NO_FUNCTION     # not a whole handle
     fmu_native.invalidate(H)
     assert fmu_native.exchange(H, vr_in, u, H_STEP, H_STEP, vr_out, out) == fmu_native.NO_FUNCTION
     assert fmu_native.get_state(H) == (fmu_native.NO_FUNCTION, 0)
@@ -232,6 +234,8 @@ def test_handle_keeps_the_endpoint_alive(ball_bearing_fmu):
     ep = FmuEndpoint(ball_bearing_fmu)
     with pytest.raises(ValueError, match="not initialised"):
         fmu_native.endpoint_handle(ep)
+    with pytest.raises(ValueError, match="instantiated"):
+        fmu_native.handle(ep.fmu)
     ep.initialize(START)
     H, ref = fmu_native.endpoint_handle(ep), weakref.ref(ep)
     del ep

@@ -11,7 +11,8 @@ fmpy loads the FMU's binary, instantiates, initialises, terminates and frees it 
 * ``exchange``, ``set_reals``, ``do_step``, ``get_reals``, ``get_integers``, ``get_booleans``, ``get_state``,
   ``set_state``, ``free_state``: ``@njit(cache=True)`` functions callable from other njit code. They return
   the fmi2Status (0 OK, 1 warning, 2 discard, 3 error, 4 fatal) or ``BAD_ARGUMENT`` (array sizes or layout
-  wrong, nothing called) / ``NO_FUNCTION`` (the FMU lacks the function, nothing called); ``check`` raises the
+  wrong, nothing called) / ``NO_FUNCTION`` (the FMU lacks the function, or ``H`` is invalidated or not a whole
+  handle; nothing called); ``check`` raises the
   ``ExchangeError`` ``FmuEndpoint`` raises, with the FMU's logged messages.
 
 How the call is made: the addresses are *data* (the int64 slots), not compile-time constants, so the machine
@@ -151,6 +152,12 @@ _int_address = _address_of(types.int32, "integer/boolean values (fmi2Integer, fm
 # ---- the calls for njit code ---------------------------------------------------------------------------
 
 @njit(cache=True)
+def _missing(H, slot) -> bool:
+    """The handle is too short, invalidated, or the FMU lacks the function of ``slot``."""
+    return H.size < SLOTS or H[COMPONENT] == 0 or H[slot] == 0
+
+
+@njit(cache=True)
 def _fits(vr, values) -> bool:
     return vr.size <= values.size and vr.flags.c_contiguous and values.flags.c_contiguous
 
@@ -158,7 +165,7 @@ def _fits(vr, values) -> bool:
 @njit(cache=True)
 def set_reals(H, vr, values) -> int:
     """fmi2SetReal of ``values[:len(vr)]`` (float64) to ``vr`` (uint32)."""
-    if H[SET_REAL] == 0:
+    if _missing(H, SET_REAL):
         return NO_FUNCTION
     if not _fits(vr, values):
         return BAD_ARGUMENT
@@ -168,7 +175,7 @@ def set_reals(H, vr, values) -> int:
 @njit(cache=True)
 def get_reals(H, vr, out) -> int:
     """fmi2GetReal of ``vr`` (uint32) into ``out[:len(vr)]`` (float64)."""
-    if H[GET_REAL] == 0:
+    if _missing(H, GET_REAL):
         return NO_FUNCTION
     if not _fits(vr, out):
         return BAD_ARGUMENT
@@ -178,7 +185,7 @@ def get_reals(H, vr, out) -> int:
 @njit(cache=True)
 def get_integers(H, vr, out) -> int:
     """fmi2GetInteger of ``vr`` (uint32) into ``out[:len(vr)]`` (int32)."""
-    if H[GET_INTEGER] == 0:
+    if _missing(H, GET_INTEGER):
         return NO_FUNCTION
     if not _fits(vr, out):
         return BAD_ARGUMENT
@@ -188,7 +195,7 @@ def get_integers(H, vr, out) -> int:
 @njit(cache=True)
 def get_booleans(H, vr, out) -> int:
     """fmi2GetBoolean of ``vr`` (uint32) into ``out[:len(vr)]`` (int32: fmi2Boolean is a C int)."""
-    if H[GET_BOOLEAN] == 0:
+    if _missing(H, GET_BOOLEAN):
         return NO_FUNCTION
     if not _fits(vr, out):
         return BAD_ARGUMENT
@@ -198,7 +205,7 @@ def get_booleans(H, vr, out) -> int:
 @njit(cache=True)
 def do_step(H, t, h) -> int:
     """fmi2DoStep(t, h, noSetFMUStatePriorToCurrentPoint = fmi2True)."""
-    if H[DO_STEP] == 0:
+    if _missing(H, DO_STEP):
         return NO_FUNCTION
     return _call_do_step(H[DO_STEP], H[COMPONENT], np.float64(t), np.float64(h), np.int32(1))
 
@@ -219,7 +226,7 @@ def exchange(H, vr_in, u, t, h, vr_out, out) -> int:
 @njit(cache=True)
 def get_state(H):
     """fmi2GetFMUstate: (status, the new state's pointer as int64; 0 if none was made)."""
-    if H[GET_STATE] == 0:
+    if _missing(H, GET_STATE):
         return NO_FUNCTION, np.int64(0)
     status, state = _call_out_pointer(H[GET_STATE], H[COMPONENT], np.int64(0))
     return status, state
@@ -228,7 +235,7 @@ def get_state(H):
 @njit(cache=True)
 def set_state(H, state) -> int:
     """fmi2SetFMUstate of the state ``state`` (a pointer from ``get_state``)."""
-    if H[SET_STATE] == 0:
+    if _missing(H, SET_STATE):
         return NO_FUNCTION
     if state == 0:
         return BAD_ARGUMENT
@@ -238,7 +245,7 @@ def set_state(H, state) -> int:
 @njit(cache=True)
 def free_state(H, state) -> int:
     """fmi2FreeFMUstate of ``state`` (a pointer from ``get_state``; 0: nothing to free, OK)."""
-    if H[FREE_STATE] == 0:
+    if _missing(H, FREE_STATE):
         return NO_FUNCTION
     if state == 0:
         return 0
@@ -309,7 +316,7 @@ def status_name(status: int) -> str:
     if status == BAD_ARGUMENT:
         return "BAD_ARGUMENT (array sizes, types or layout; nothing called)"
     if status == NO_FUNCTION:
-        return "NO_FUNCTION (the FMU lacks the function or the handle was invalidated; nothing called)"
+        return "NO_FUNCTION (the FMU lacks the function, or the handle was invalidated or is not one; nothing called)"
     return _FMI_STATUS[status] if 0 <= status < len(_FMI_STATUS) else str(status)
 
 
