@@ -215,7 +215,31 @@ def test_native_samples_equal_the_endpoints(endpoint):
     expected = endpoint.sample()
     assert [*real, *map(float, integer), *map(float, boolean)] == expected
     assert integer[0] > 0 and max(real) > 0                      # loaded balls: in the load zone
+    row = np.full(len(endpoint.sample_names) + 1, np.nan)
+    assert fmu_native.sample_into(H, refs.real_samples, refs.int_samples, refs.bool_samples, row) == 0
+    assert row[:-1].tolist() == expected and np.isnan(row[-1])
+    assert fmu_native.sample_into(H, refs.real_samples, refs.int_samples, refs.bool_samples,
+                                  row[:5]) == fmu_native.BAD_ARGUMENT
     np.testing.assert_array_equal(out, endpoint.fmu.getReal(refs.coupling.tolist()))
+
+
+def test_sample_into_with_a_boolean_output(journal_clearance_fmu):
+    """JournalClearance samples a boolean (in_contact): sample_into gives sample()'s row in and out of contact."""
+    ep = FmuEndpoint(journal_clearance_fmu)
+    try:
+        ep.initialize((0.0,) * 6)
+        H, refs = fmu_native.endpoint_handle(ep), fmu_native.endpoint_references(ep)
+        assert len(refs.bool_samples) == 1
+        row, out, flags = np.zeros(len(ep.sample_names)), np.zeros(len(refs.coupling)), []
+        for k, e_x in enumerate((5e-6, 1.2e-5, 1.5e-5, 5e-6)):     # radial clearance 10 um
+            u = np.array([e_x, 0.0, 0.01 if k < 2 else -0.01, 0.0, 10.0, 0.0])
+            assert fmu_native.exchange(H, refs.inputs, u, k * H_STEP, H_STEP, refs.coupling, out) == 0
+            assert fmu_native.sample_into(H, refs.real_samples, refs.int_samples, refs.bool_samples, row) == 0
+            assert row.tolist() == ep.sample()
+            flags.append(row[ep.sample_names.index("in_contact")])
+        assert flags == [0.0, 1.0, 1.0, 0.0]
+    finally:
+        ep.close()
 
 
 def test_booleans(ball_bearing_fmu):

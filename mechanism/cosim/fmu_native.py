@@ -224,6 +224,28 @@ def exchange(H, vr_in, u, t, h, vr_out, out) -> int:
 
 
 @njit(cache=True)
+def sample_into(H, vr_real, vr_int, vr_bool, row) -> int:
+    """The sampled outputs into ``row`` (float64) in ``FmuEndpoint.sample_names``'s order: the reals of
+    ``vr_real``, then the integers of ``vr_int``, then the booleans of ``vr_bool`` as 0.0/1.0
+    (``FmuEndpoint.sample_into``; ``endpoint_references`` gives the three)."""
+    nr, ni, nb = vr_real.size, vr_int.size, vr_bool.size
+    if row.size < nr + ni + nb:
+        return BAD_ARGUMENT
+    status = get_reals(H, vr_real, row[:nr]) if nr else 0
+    if ni and 0 <= status <= 1:
+        ints = np.empty(ni, np.int32)
+        status = get_integers(H, vr_int, ints)
+        for k in range(ni):
+            row[nr + k] = ints[k]
+    if nb and 0 <= status <= 1:
+        flags = np.empty(nb, np.int32)
+        status = get_booleans(H, vr_bool, flags)
+        for k in range(nb):
+            row[nr + ni + k] = 1.0 if flags[k] != 0 else 0.0
+    return status
+
+
+@njit(cache=True)
 def get_state(H):
     """fmi2GetFMUstate: (status, the new state's pointer as int64; 0 if none was made)."""
     if _missing(H, GET_STATE):
