@@ -271,6 +271,22 @@ def test_handle_keeps_the_endpoint_alive(ball_bearing_fmu):
     ref().close()
 
 
+def test_closing_invalidates_the_handles(ball_bearing_fmu):
+    """FmuEndpoint.close (or the slave's freeInstance) zeroes its handles: a late call returns NO_FUNCTION
+    instead of reaching the freed instance (which hangs the process)."""
+    ep = FmuEndpoint(ball_bearing_fmu)
+    ep.initialize(START)
+    handles, refs = [fmu_native.endpoint_handle(ep) for _ in range(2)], fmu_native.endpoint_references(ep)
+    out = np.zeros(8)
+    ep.close()
+    for H in handles:
+        assert not H.any()
+        assert fmu_native.exchange(H, refs.inputs, np.array(START), 0.0, H_STEP, refs.coupling,
+                                   out) == fmu_native.NO_FUNCTION
+    with pytest.raises(ValueError, match="not initialised"):
+        fmu_native.endpoint_handle(ep)
+
+
 def test_cached_machine_code_serves_a_new_process(ball_bearing_fmu, tmp_path):
     """cache=True: the second process loads the first one's machine code (the addresses are data, not
     constants compiled in) and its exchanges equal fmpy's."""

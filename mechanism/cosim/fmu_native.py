@@ -22,12 +22,14 @@ fmi2Component and arrays as pointers, size_t as i64, fmi2Real as double, fmi2Boo
 numba's compiled code holds the GIL, so the FMU's logger (a ctypes callback, ``fmpy_logging``) and the
 Python step inside the FMU (BEARING_FMU_C_STEP=0) run as they do under fmpy's calls.
 
-Do not use ``H`` after the FMU instance is freed (``FmuEndpoint.close``, ``FMU2Slave.freeInstance``): the
-component pointer would dangle. ``invalidate(H)`` zeroes the slots: every call then returns NO_FUNCTION.
+The component pointer dangles once the instance is freed: ``handle`` wraps the slave's ``freeInstance``
+(called by ``FmuEndpoint.close``) so that it first zeroes every handle of the instance (``invalidate``), and
+every native call then returns NO_FUNCTION instead of reaching freed memory.
 """
 from __future__ import annotations
 
 import ctypes
+import weakref
 from typing import NamedTuple
 
 import numpy as np
@@ -296,7 +298,27 @@ def handle(slave, *keep) -> np.ndarray:
     slots.keep = (slave, getattr(slave, "callbacks", None), *keep)
     H = np.ctypeslib.as_array(slots)
     assert H.dtype == np.int64 and H.shape == (SLOTS,)
+    _invalidate_on_free(slave, H)
     return H
+
+
+def _invalidate_on_free(slave, H: np.ndarray) -> None:
+    """Make ``slave.freeInstance()`` (which ``FmuEndpoint.close`` calls) zero ``H`` before the instance goes:
+    a call through a handle of a freed instance would reach freed memory (it hangs or crashes the host)."""
+    handles = slave.__dict__.get("_fmu_native_handles")
+    if handles is None:
+        handles = slave.__dict__["_fmu_native_handles"] = []
+        free = slave.freeInstance
+
+        def freeInstance():
+            for ref in handles:
+                live = ref()
+                if live is not None:
+                    invalidate(live)
+            handles.clear()
+            return free()
+        slave.freeInstance = freeInstance
+    handles[:] = [ref for ref in handles if ref() is not None] + [weakref.ref(H)]
 
 
 def endpoint_handle(endpoint) -> np.ndarray:
