@@ -68,8 +68,10 @@ def pair(request, ball_bearing_fmu, monkeypatch, tmp_path):
         ep.close()
 
 
-@pytest.fixture
-def endpoint(ball_bearing_fmu):
+@pytest.fixture(params=["1", "0"], ids=["C-step", "Python-step"])
+def endpoint(request, ball_bearing_fmu, monkeypatch):
+    """An initialised endpoint of the FMU, the C step switched at instantiation."""
+    monkeypatch.setenv("BEARING_FMU_C_STEP", request.param)
     ep = FmuEndpoint(ball_bearing_fmu)
     ep.initialize(START)
     yield ep
