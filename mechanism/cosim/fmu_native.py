@@ -8,8 +8,9 @@ fmpy loads the FMU's binary, instantiates, initialises, terminates and frees it 
   addresses of fmi2SetReal, fmi2DoStep, fmi2GetReal, fmi2GetInteger, fmi2GetBoolean, fmi2GetFMUstate,
   fmi2SetFMUstate, fmi2FreeFMUstate (slots below). The array's buffer holds a reference to the fmpy objects
   (slave, callbacks, endpoint), so they live as long as ``H`` does.
-* ``exchange``, ``set_reals``, ``do_step``, ``get_reals``, ``get_integers``, ``get_booleans``, ``get_state``,
-  ``set_state``, ``free_state``: ``@njit(cache=True)`` functions callable from other njit code. They return
+* ``endpoint_references(endpoint)``: the value references an endpoint exchanges and samples, as uint32 arrays.
+* ``exchange``, ``set_reals``, ``do_step``, ``get_reals``, ``get_integers``, ``get_booleans``, ``sample_into``,
+  ``get_state``, ``set_state``, ``free_state``: ``@njit(cache=True)`` functions callable from other njit code. They return
   the fmi2Status (0 OK, 1 warning, 2 discard, 3 error, 4 fatal) or ``BAD_ARGUMENT`` (array sizes or layout
   wrong, nothing called) / ``NO_FUNCTION`` (the FMU lacks the function, or ``H`` is invalidated or not a whole
   handle; nothing called); ``check`` raises the
@@ -39,6 +40,8 @@ from numba.core import cgutils
 from numba.core.errors import TypingError
 from numba.extending import intrinsic
 
+from mechanism.cosim.endpoints import _STATUS, ExchangeError
+
 #: slots of the handle array
 COMPONENT, SET_REAL, DO_STEP, GET_REAL, GET_INTEGER, GET_BOOLEAN, GET_STATE, SET_STATE, FREE_STATE = range(9)
 FUNCTIONS = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal", "fmi2GetInteger", "fmi2GetBoolean",
@@ -46,7 +49,6 @@ FUNCTIONS = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal", "fmi2GetInteger", "fmi2
 SLOTS = 1 + len(FUNCTIONS)
 #: statuses of this module (negative: no fmi2 function was called)
 BAD_ARGUMENT, NO_FUNCTION = -1, -2
-_FMI_STATUS = ("OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING")
 
 _I8P = ir.IntType(8).as_pointer()
 _I32, _I64, _F64 = ir.IntType(32), ir.IntType(64), ir.DoubleType()
@@ -294,10 +296,9 @@ def handle(slave, *keep) -> np.ndarray:
     slots[COMPONENT] = int(component)
     for k, name in enumerate(FUNCTIONS, start=1):
         f = functions.get(name)
-        slots[k] = ctypes.cast(f, ctypes.c_void_p).value or 0 if f is not None else 0
+        slots[k] = (ctypes.cast(f, ctypes.c_void_p).value or 0) if f is not None else 0
     slots.keep = (slave, getattr(slave, "callbacks", None), *keep)
-    H = np.ctypeslib.as_array(slots)
-    assert H.dtype == np.int64 and H.shape == (SLOTS,)
+    H = np.ctypeslib.as_array(slots)     # its base (a memoryview of slots) keeps slots, and so keep, alive
     _invalidate_on_free(slave, H)
     return H
 
@@ -357,17 +358,17 @@ def invalidate(H: np.ndarray) -> None:
 
 
 def status_name(status: int) -> str:
+    """The fmi2Status's name, or what this module's own negative statuses mean."""
     if status == BAD_ARGUMENT:
         return "BAD_ARGUMENT (array sizes, types or layout; nothing called)"
     if status == NO_FUNCTION:
         return "NO_FUNCTION (the FMU lacks the function, or the handle was invalidated or is not one; nothing called)"
-    return _FMI_STATUS[status] if 0 <= status < len(_FMI_STATUS) else str(status)
+    return _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
 
 
 def check(status: int, what: str, endpoint=None) -> int:
     """``status`` if it is OK or a warning, else the ``ExchangeError`` FmuEndpoint raises: ``endpoint``'s
     last logged messages (``FmuEndpoint._fail``), else the status."""
-    from mechanism.cosim.endpoints import ExchangeError
     status = int(status)
     if 0 <= status <= 1:
         return status
