@@ -231,7 +231,6 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
     snap_cs = np.zeros(cs.shape[0])
     no_row = np.zeros(0)
     npast = iset[13]
-    nb = int(P[0])
     ns = cols.shape[0] - 9
     ecc_limit = fset[13]
     for step in range(first, last + 1):
@@ -260,8 +259,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             else:
                 drift_model(past, npast, drift_history, fm)
             m = substeps(h, past[npast - 1], mobility, sub_limit, max_sub)
-            if m > counts[0]:
-                counts[0] = m
+            counts[0] = max(counts[0], m)
             counts[1] += m
             hs = h / m
             k1v = iset[10] != 0 and k1_valid(fm, t0, xin, xf)
@@ -341,8 +339,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
         if iterative:
             counts[2] += 1
             counts[3] += passes
-            if passes > counts[4]:
-                counts[4] = passes
+            counts[4] = max(counts[4], passes)
         y = y_end
         record = step % every == 0
         row = data[counts[8]] if record else no_row

@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numba import njit
 
-from fmu_bearing.life import P_STATIONARY, _CUBE_OF_STATIONARY, _TWO_PI
+from fmu_bearing.life import _CUBE_OF_STATIONARY, _TWO_PI, P_STATIONARY
 from mechanism.cosim.law_kernel import evaluate
 
 CS_CAGE, CS_INPUTS, CS_OUT, CS_LOADS = 0, 1, 7, 17
@@ -97,7 +97,3 @@ def law_exchange(P, eccentricity_limit, cs, h, sent):
     evaluate(P, ex, ey, vx, vy, cs[CS_CAGE], wi, wo, cs[CS_OUT:CS_OUT + 10], loads)
     life_add(loads, cs[CS_LOADS + nb:CS_LOADS + nb + 4], nb, wi, wo, h)
     return 0
-
-
-def new_state(n_balls: int) -> np.ndarray:
-    return np.zeros(state_size(n_balls))
