@@ -598,7 +598,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
         loop.start(y)
         loop.record(rec, 0.0, y)
         compiled = None
-        if settings.compiled_loop:
+        if settings.compiled_loop and getattr(endpoint, "kind", None) == "in-process":
             from mechanism.cosim import compiled_driver
             if compiled_driver.eligible(loop):
                 compiled = compiled_driver.CompiledLoop(loop, rec, y, every)
