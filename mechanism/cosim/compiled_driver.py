@@ -85,7 +85,7 @@ class CompiledLoop:
         self.integrals = loop.integrals if loop.integrals is not None else np.zeros(5)
         self.acc = loop._acc if self.energy is not None else np.zeros(3)
         self.p1 = loop._p1 if self.energy is not None else np.zeros(3)
-        self.stages = loop._stages if self.energy is not None else np.zeros((5, 8))
+        self.stages = loop._stages if self.energy is not None else np.zeros((5 * max(1, settings.max_substeps), 8))
         self.sent = np.zeros(6)
         self.fail = np.zeros(9)
         self.steps_done = 0

@@ -263,11 +263,10 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             counts[1] += m
             hs = h / m
             k1v = iset[10] != 0 and k1_valid(fm, t0, xin, xf)
-            if energy:
-                acc[:] = 0.0
-                y_end, drift, finite = advance(y, t0, hs, m, t, fm, dy, k1v, I, R, L, LR, W, u, acc, p1, stages)
-            else:
-                y_end, drift, finite = advance(y, t0, hs, m, t, fm, dy, k1v, I, R, L, LR, W, u)
+            # with the account's arrays also without an account (one specialisation to compile): the powers and
+            # stages are computed and not used, the state and the inputs are the same
+            acc[:] = 0.0
+            y_end, drift, finite = advance(y, t0, hs, m, t, fm, dy, k1v, I, R, L, LR, W, u, acc, p1, stages)
             if not finite:
                 _fail(fail, NOT_FINITE, step, t)
                 return y
@@ -343,12 +342,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
         y = y_end
         record = step % every == 0
         row = data[counts[8]] if record else no_row
-        if energy:
-            finish(y, xin[0], xin[1], xf[0], xf[1], I, R, L, LR, W, u, dy, lam, row, probes, scale, t, fset[4],
-                   react, p1)
-        else:
-            finish(y, xin[0], xin[1], xf[0], xf[1], I, R, L, LR, W, u, dy, lam, row, probes, scale, t, fset[4],
-                   react)
+        finish(y, xin[0], xin[1], xf[0], xf[1], I, R, L, LR, W, u, dy, lam, row, probes, scale, t, fset[4], react, p1)
         iset[10] = 1
         if record:
             counts[8] += 1
