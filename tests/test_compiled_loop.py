@@ -20,9 +20,18 @@ from mechanism import run as run_module
 from mechanism.cosim import compiled_driver, compiled_loop, component_kernel
 from mechanism.cosim.coupling import Exchanged
 from mechanism.cosim.coupling.implicit import onset_jumps
+from mechanism.cosim.endpoints import InProcessEndpoint
+from mechanism.cosim.joint import BearingLink
 from mechanism.cosim.law_kernel import pack_bearing
-from mechanism.cosim.master import MasterSettings
+from mechanism.cosim.master import MasterSettings, run_master
+from mechanism.multibody.solver import System
 from mechanism.run import RunConfig, run
+from mechanism.systems.slider_crank import (
+    SliderCrankParameters,
+    build,
+    initial_state,
+    slider_crank_observer,
+)
 
 RTOL = 1e-9
 
@@ -159,3 +168,23 @@ def test_onset_jumps_match_the_scheme():
         np.testing.assert_allclose(jumps[:count], np.array(expected).reshape(-1, 3), rtol=1e-13, atol=0.0)
         found += count
     assert found > 50
+
+
+@pytest.mark.parametrize("with_law", [False, True])
+def test_without_energy_account(with_law):
+    """``run_master`` without an energy account, with and without the contact law locating onsets."""
+    params = SliderCrankParameters(rpm=1200)
+    model = build(params, "bearing")
+    system = System(model)
+    q0, qd0 = initial_state(system, params)
+    results = []
+    for compiled in (False, True):
+        endpoint = InProcessEndpoint({"damping_model": 1, "damping_coefficient": 50.0})
+        settings = MasterSettings(t_end=0.02 * 60 / 1200, step=1e-5, progress=False, compiled_loop=compiled)
+        results.append(run_master(system, q0, qd0, settings, slider_crank_observer(system),
+                                  link=BearingLink(system, model.bearings[0]), endpoint=endpoint,
+                                  contact_law=endpoint.bearing if with_law else None))
+    ref, new = results
+    assert ref.ok and new.ok and not ref.has("energy_residual")
+    np.testing.assert_allclose(new.data, ref.data, rtol=RTOL, atol=0.0)
+    assert all(_close(new.meta[k], ref.meta[k]) for k in ref.meta) and new.meta.keys() == ref.meta.keys()
