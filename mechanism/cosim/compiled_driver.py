@@ -90,11 +90,12 @@ class CompiledLoop:
         self.fail = np.zeros(9)
         self.steps_done = 0
         self.t = 0.0
+        self.failure: tuple[int, float, str] | None = None
 
     def run(self, first: int, last: int, y: np.ndarray) -> np.ndarray:
-        """Steps ``first`` .. ``last`` from y; returns the state reached. A failure raises ``RunFailure``
-        (the same step, time and cause as the Python loop) with the objects synced and the samples kept."""
-        from mechanism.cosim.master import RunFailure
+        """Steps ``first`` .. ``last`` from y; returns the state reached. After a failure ``failure`` is
+        (step, time, cause) as the Python loop words them (``master.RunFailure``'s arguments), the objects synced
+        and the samples kept."""
         loop, rec = self.loop, self.rec
         if rec.rows + (last - first + 1) // max(1, self.every) + 1 > len(rec.data):   # never with run_master's capacity
             rec.data = np.vstack([rec.data, np.full_like(rec.data, np.nan)])
@@ -112,7 +113,8 @@ class CompiledLoop:
         t = step * self.h
         self.steps_done, self.t = step - 1, (step - 1) * self.h
         self.sync(y)
-        raise RunFailure(step, t, self._cause(code))
+        self.failure = (step, t, self._cause(code))
+        return y
 
     def _cause(self, code: int) -> str:
         """The failure's cause as the Python loop words it."""

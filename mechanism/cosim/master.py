@@ -605,6 +605,8 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
         while compiled is not None and step < n_steps:     # chunks of 500 steps: the bar and the poll between
             last = min(n_steps, (step // 500 + 1) * 500)
             y = compiled.run(step + 1, last, y)
+            if compiled.failure is not None:
+                raise RunFailure(*compiled.failure)
             step, t = last, last * h
             if step % 500 == 0:
                 bar.update(500)
