@@ -170,9 +170,11 @@ def test_onset_jumps_match_the_scheme():
     assert found > 50
 
 
-@pytest.mark.parametrize("with_law", [False, True])
-def test_without_energy_account(with_law):
-    """``run_master`` without an energy account, with and without the contact law locating onsets."""
+@pytest.mark.parametrize("with_law, options", [(False, {}), (True, {}),
+                                               (True, {"iterate_where_needed": False, "max_iterations": 3})])
+def test_without_energy_account(with_law, options):
+    """``run_master`` without an energy account, with and without the contact law locating onsets, and
+    iterating until two passes agree (no prediction) with at most 3 passes."""
     params = SliderCrankParameters(rpm=1200)
     model = build(params, "bearing")
     system = System(model)
@@ -180,7 +182,8 @@ def test_without_energy_account(with_law):
     results = []
     for compiled in (False, True):
         endpoint = InProcessEndpoint({"damping_model": 1, "damping_coefficient": 50.0})
-        settings = MasterSettings(t_end=0.02 * 60 / 1200, step=1e-5, progress=False, compiled_loop=compiled)
+        settings = MasterSettings(t_end=0.02 * 60 / 1200, step=1e-5, progress=False, compiled_loop=compiled,
+                                  **options)
         results.append(run_master(system, q0, qd0, settings, slider_crank_observer(system),
                                   link=BearingLink(system, model.bearings[0]), endpoint=endpoint,
                                   contact_law=endpoint.bearing if with_law else None))
