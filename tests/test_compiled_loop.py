@@ -23,7 +23,7 @@ from mechanism.cosim.coupling.implicit import onset_jumps
 from mechanism.cosim.endpoints import InProcessEndpoint
 from mechanism.cosim.joint import BearingLink
 from mechanism.cosim.law_kernel import pack_bearing
-from mechanism.cosim.master import MasterSettings, run_master
+from mechanism.cosim.master import MasterSettings, RunFailure, run_master
 from mechanism.multibody.solver import System
 from mechanism.run import RunConfig, run
 from mechanism.systems.slider_crank import (
@@ -191,3 +191,32 @@ def test_without_energy_account(with_law, options):
     assert ref.ok and new.ok and not ref.has("energy_residual")
     np.testing.assert_allclose(new.data, ref.data, rtol=RTOL, atol=0.0)
     assert all(_close(new.meta[k], ref.meta[k]) for k in ref.meta) and new.meta.keys() == ref.meta.keys()
+
+
+def test_the_poll_between_chunks_stops_the_run_alike():
+    """The observer's poll (mechanism.run's signal check) runs every 500 steps; raising there stops both loops
+    at the same step with the same rows."""
+    params = SliderCrankParameters(rpm=1200)
+    model = build(params, "bearing")
+    system = System(model)
+    q0, qd0 = initial_state(system, params)
+    inner = slider_crank_observer(system)
+
+    def observe(q, qd, qdd, lam, t):
+        return inner(q, qd, qdd, lam, t)
+
+    def poll(t):
+        if t > 0.0045:
+            raise RunFailure(-1, t, "interrupted by SIGINT")
+
+    observe.probes, observe.poll = inner.probes, poll
+    results = []
+    for compiled in (False, True):
+        endpoint = InProcessEndpoint({"damping_model": 1, "damping_coefficient": 50.0})
+        settings = MasterSettings(t_end=0.2 * 60 / 1200, step=1e-5, progress=False, compiled_loop=compiled)
+        results.append(run_master(system, q0, qd0, settings, observe, link=BearingLink(system, model.bearings[0]),
+                                  endpoint=endpoint, contact_law=endpoint.bearing))
+    ref, new = results
+    assert ref.status == new.status == "failed" and new.message == ref.message
+    assert new.meta["failure"] == ref.meta["failure"] and len(ref.data) == 501
+    np.testing.assert_array_equal(new.data, ref.data)
