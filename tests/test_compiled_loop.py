@@ -123,10 +123,15 @@ def test_failure_is_reported_alike(settings, step, monkeypatch):
 
 
 def test_other_paths_run_the_python_loop(monkeypatch):
-    """A scheme the compiled loop does not implement falls back to the Python loop."""
+    """A scheme the compiled loop does not implement, or the kernels off, fall back to the Python loop."""
     cfg = RunConfig(mode="inprocess", rpm=1200, revs=0.01, scheme="extrap1", progress=False)
     result, chunks = _run(cfg, True, monkeypatch)
     assert result.ok and chunks == 0
+    monkeypatch.setattr(compiled_driver.CompiledLoop, "__init__", None)    # would fail if used
+    settings = functools.partial(MasterSettings, kernels=False)
+    with monkeypatch.context() as m:
+        m.setattr(run_module, "MasterSettings", settings)
+        assert run(RunConfig(mode="inprocess", rpm=1200, revs=0.005, progress=False)).ok
 
 
 def test_life_add_matches_the_accumulator():
