@@ -81,6 +81,8 @@ class MasterSettings:
     iterate_where_needed: bool = True    # iterated schemes: also stop when the predicted change of a further pass is
                                          # within iteration_tol (CouplingLoop._next_pass_negligible); False: always
                                          # repeat until two passes agree
+    compiled_loop: bool = True           # the whole step compiled (mechanism.cosim.compiled_driver) where it applies
+                                         # (in-process component, interface-Jacobian schemes); False: the Python loop
 
 
 #: observe(q, qd, qdd, lam, t) -> named observables of the mechanism (slider_x, crank_moment, ...)
@@ -595,7 +597,22 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     try:
         loop.start(y)
         loop.record(rec, 0.0, y)
-        for step in range(1, n_steps + 1):
+        compiled = None
+        if settings.compiled_loop and getattr(endpoint, "kind", None) == "in-process":
+            from mechanism.cosim import compiled_driver
+            if compiled_driver.eligible(loop):
+                compiled = compiled_driver.CompiledLoop(loop, rec, y, every)
+        while compiled is not None and step < n_steps:     # chunks of 500 steps: the bar and the poll between
+            last = min(n_steps, (step // 500 + 1) * 500)
+            y = compiled.run(step + 1, last, y)
+            if compiled.failure is not None:
+                raise RunFailure(*compiled.failure)
+            step, t = last, last * h
+            if step % 500 == 0:
+                bar.update(500)
+                if poll is not None:
+                    poll(t)
+        for step in range(1, n_steps + 1) if compiled is None else ():
             t0 = (step - 1) * h
             t = step * h
             y = loop.communicate(y, t0, h, step, t, rec if step % every == 0 else None)

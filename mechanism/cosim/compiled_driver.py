@@ -1,0 +1,155 @@
+"""The Python side of the compiled communication step (``compiled_loop.run_steps``): eligibility, packing
+the master's objects into arrays, running chunks of steps, and leaving the objects as the Python loop would.
+
+``run_master`` uses it when ``MasterSettings.compiled_loop`` is set, the kernels are on, the observer's probes
+are compiled, the component is an ``InProcessEndpoint`` with the compiled law and the scheme is one of
+``SCHEMES``; otherwise the Python loop (the reference) runs.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from fmu_bearing.ball_bearing import BearingInputError
+from mechanism.cosim import compiled_loop as cl
+from mechanism.cosim import component_kernel as ck
+from mechanism.cosim.coupling import Exchanged
+from mechanism.cosim.law_kernel import pack_bearing
+
+#: the schemes the compiled loop implements (their force models: ``compiled_loop.drift_model``, ``trial_model``)
+SCHEMES = ("jacobian", "jacobian-drift", "jacobian-secant", "jacobian-implicit")
+
+
+def eligible(loop) -> bool:
+    """True if ``loop`` (a started ``CouplingLoop``) can run compiled (see the module docstring)."""
+    from mechanism.cosim.endpoints import InProcessEndpoint
+    endpoint, scheme = loop.endpoint, loop.scheme
+    return bool(getattr(loop.settings, "compiled_loop", False) and loop.kernels and loop._observe_in_kernel
+                and loop.link is not None and type(endpoint) is InProcessEndpoint
+                and getattr(endpoint, "_law", None) is not None
+                and scheme is not None and scheme.name in SCHEMES and scheme.ordering == "gauss-seidel"
+                and (loop.energy is None or loop.integrals is not None))
+
+
+class CompiledLoop:
+    """The arrays of one run for ``compiled_loop.run_steps``, made after ``CouplingLoop.start`` and the first
+    ``record``; ``run`` advances a chunk of steps, ``sync`` writes the state back into the Python objects."""
+
+    def __init__(self, loop, rec, y: np.ndarray, every: int):
+        self.loop, self.rec, self.every = loop, rec, every
+        settings, scheme, endpoint, link = loop.settings, loop.scheme, loop.endpoint, loop.link
+        self.h = settings.step
+        self.secant = scheme.ring_speeds == "secant"
+        index = rec.index
+        self.energy = loop.energy if loop.integrals is not None else None
+        ecols = [index[c] for c in ("contact_energy", "damping_dissipation", "drive_work", "cage_work",
+                                    "applied_work", "energy_residual")] if self.energy is not None else [-1] * 6
+        scols = loop._sample_cols
+        scols = list(range(scols.start, scols.stop)) if isinstance(scols, slice) else [int(c) for c in scols]
+        self.cols = np.array([index["omega_inner"], index["omega_outer"], index["kinetic_energy"], *ecols, *scols],
+                             np.int64)
+        self.P = endpoint._law
+        self.cs = ck.pack_state(endpoint)
+        law = loop.contact_law
+        self.PC = pack_bearing(law) if law is not None else np.zeros(0)
+        fset = np.zeros(cl.N_FSET)
+        fset[0:5] = (loop.mobility, settings.substep_limit, settings.max_constraint_violation,
+                     settings.iteration_tol, loop._cv)
+        if law is not None:
+            fset[5:8] = (law.params.cage_angle_start, *loop._angles0)
+        if self.energy is not None:
+            acct = self.energy
+            acct.stage_integrals(np.zeros((5, 8)), 0, 0.0)       # sets up its stage kernel (P, cage offset)
+            _, self.PE, offset = acct._stage_kernel
+            fset[8:13] = (acct._start, offset, acct.bearing.params.cage_angle_start, *acct._angles0)
+        else:
+            self.PE = self.P
+        fset[13] = endpoint.bearing.eccentricity_limit
+        self.fset = fset
+        iset = np.zeros(cl.N_ISET, np.int64)
+        iset[0:10] = (settings.max_substeps, max(2, settings.max_iterations), settings.iterate_where_needed,
+                      scheme.iterative, self.secant, self.energy is not None, link._theta_j, link._theta_i,
+                      law is not None, loop.system.m > 0)
+        iset[10] = loop._end[0] is y and loop._end[1] == 0.0
+        iset[12] = scheme.history == 2
+        self.past = np.zeros((2, 13))
+        for k, x in enumerate(scheme.past):
+            self.past[k] = (x.t, x.e_x, x.e_y, x.v_x, x.v_y, x.F_x, x.F_y, x.k_xx, x.k_xy, x.k_yy, x.c_xx,
+                            x.c_xy, x.c_yy)
+        iset[13] = len(scheme.past)
+        self.iset = iset
+        self.xin = np.array(loop.inputs, np.float64)
+        self.xf = np.array(loop.force, np.float64)
+        it = loop.iterations
+        self.counts = np.array([loop.substeps_max, loop.substeps_total, it["steps"], it["passes"], it["max_passes"],
+                                it["not_converged"], it["predicted"], endpoint.calls, rec.rows], np.int64)
+        self.integrals = loop.integrals if loop.integrals is not None else np.zeros(5)
+        self.acc = loop._acc if self.energy is not None else np.zeros(3)
+        self.p1 = loop._p1 if self.energy is not None else np.zeros(3)
+        self.stages = loop._stages if self.energy is not None else np.zeros((5 * max(1, settings.max_substeps), 8))
+        self.sent = np.zeros(6)
+        self.fail = np.zeros(9)
+        self.steps_done = 0
+        self.t = 0.0
+        self.failure: tuple[int, float, str] | None = None
+
+    def run(self, first: int, last: int, y: np.ndarray) -> np.ndarray:
+        """Steps ``first`` .. ``last`` from y; returns the state reached. After a failure ``failure`` is
+        (step, time, cause) as the Python loop words them (``master.RunFailure``'s arguments), the objects synced
+        and the samples kept."""
+        loop, rec = self.loop, self.rec
+        if rec.rows + (last - first + 1) // max(1, self.every) + 1 > len(rec.data):   # never with run_master's capacity
+            rec.data = np.vstack([rec.data, np.full_like(rec.data, np.nan)])
+        y = cl.run_steps(y, first, last, self.h, self.every, loop._I, loop._R, loop._L, loop._LR, loop._W,
+                         loop._u, loop._dy, loop._lam, self.p1, self.acc, self.stages, loop._probes,
+                         loop._probe_scale, loop._react, rec.data, self.cols, self.P, self.cs, self.PC, self.PE,
+                         self.past, self.xin, self.xf, self.integrals, self.counts, self.fset, self.iset,
+                         self.sent, self.fail)
+        code = int(self.fail[0])
+        if code == cl.OK:
+            self.steps_done, self.t = last, last * self.h
+            self.sync(y)
+            return y
+        step = int(self.fail[1])
+        t = step * self.h
+        self.steps_done, self.t = step - 1, (step - 1) * self.h
+        self.sync(y)
+        self.failure = (step, t, self._cause(code))
+        return y
+
+    def _cause(self, code: int) -> str:
+        """The failure's cause as the Python loop words it."""
+        f = self.fail
+        if code == cl.NOT_FINITE:
+            return "the mechanism state is not finite (the integration diverged)"
+        if code == cl.CONSTRAINT:
+            return (f"constraint violation {float(f[3]):.3g} exceeds "
+                    f"{self.loop.settings.max_constraint_violation:g} (the integration diverged)")
+        if code == cl.FORCE:
+            return f"the bearing returned a non-finite force {(float(f[3]), float(f[4]))}"
+        sent = [float(v) for v in f[3:9]]
+        try:
+            self.loop.endpoint.bearing.check_inputs(*sent)
+        except BearingInputError as err:
+            return f"ExchangeError: {err}"
+        return f"ExchangeError: inputs {tuple(sent)} rejected"
+
+    def sync(self, y: np.ndarray) -> None:
+        """Leave the loop, the scheme, the component and the energy account as the Python loop would have."""
+        loop, endpoint, c = self.loop, self.loop.endpoint, self.counts
+        self.rec.rows = int(c[8])
+        loop.substeps_max, loop.substeps_total = int(c[0]), int(c[1])
+        loop.iterations.update(steps=int(c[2]), passes=int(c[3]), max_passes=int(c[4]), not_converged=int(c[5]),
+                               predicted=int(c[6]))
+        endpoint.calls = int(c[7])
+        ck.unpack_state(endpoint, self.cs)
+        loop.inputs = tuple(self.xin.tolist())
+        loop.force = tuple(self.xf.tolist())
+        loop._cv = float(self.fset[4])
+        past = loop.scheme.past
+        past.clear()
+        past.extend(Exchanged(*row) for row in self.past[:int(self.iset[13])].tolist())
+        if self.secant and self.steps_done > 0:
+            loop.sent_ring_speeds = (float(self.sent[4]), float(self.sent[5]))
+        loop._end = (y, self.t) if self.iset[10] else (None, None)
+        if self.energy is not None:
+            self.energy._sums[:] = self.integrals[:4].tolist()

@@ -1,0 +1,370 @@
+"""The whole fixed-step communication step compiled (numba): a chunk of steps of ``run_master`` in one call.
+
+A second implementation of what ``master.run_master`` + ``CouplingLoop.communicate`` do per step for the
+interface-Jacobian schemes ``jacobian-drift``, ``jacobian-secant`` and ``jacobian-implicit``
+(``mechanism.cosim.coupling``) with the in-process component (``component_kernel.law_exchange``), held against
+that Python loop (the reference) by tests/test_compiled_loop.py, with the same order of operations:
+
+* the scheme's force model (``InterfaceJacobianDrift.begin_step`` / ``InterfaceJacobianImplicit.begin_step``,
+  17 coefficients of ``ForceModel``), the RK4 substeps of ``master.substeps``;
+* a pass: ``kernels.advance`` (with the energy account's stages), the divergence checks, the secant ring
+  speeds (``BearingLink.secant_ring_speeds``), the exchange, the push of the new ``Exchanged``;
+* the iteration of ``jacobian-implicit``: rollback (copies of the component state ``cs``, the exchange
+  history and the last inputs and force), the convergence test (``converged``), the contact-onset jumps
+  (``onset_jumps``), the iterate-where-needed prediction (``next_pass_negligible``), ``max_iterations``;
+* the accepted pass's energy integrals (``energy_kernel.stage_integrals``), the end-of-step evaluation
+  (``kernels.finish``: the sample and the next step's first RK4 stage), and the sample row: the probes,
+  the component's samples (cage angle, loaded balls, max ball load, ball loads), the energy account's
+  columns (``EnergyAccount.update`` with the integrals), the ring speeds sent.
+
+The exchange history is an array ``past`` (2 x 13, the fields of ``Exchanged`` in order) with its count.
+The driver (``mechanism.cosim.compiled_driver``) packs the Python objects into arrays and back.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from fmu_bearing.parameters import DAMPING_CONSTANT
+from mechanism.cosim.component_kernel import CS_CAGE, CS_LOADS, CS_OUT, law_exchange
+from mechanism.cosim.energy_kernel import stage_integrals
+from mechanism.cosim.law_kernel import elastic_energy
+from mechanism.multibody.kernels import advance, finish, force_of_model
+
+#: failure codes of ``run_steps`` (fail[0]); fail[1] = step, fail[2] = t, fail[3:] the values the message names
+OK, NOT_FINITE, CONSTRAINT, INPUTS, FORCE = 0, 1, 2, 3, 4
+#: counters (``counts``): substeps max, substeps total, iterated steps, passes, max passes, not converged,
+#: predicted, component calls, recorded rows
+N_COUNTS = 9
+#: float settings (``fset``): mobility, substep limit, max constraint violation, iteration tol, cv (in/out),
+#: contact law: cage start, journal and housing angle at t = 0; energy: start energy, stage cage offset,
+#: cage start, journal and housing angle at t = 0; eccentricity limit
+N_FSET = 14
+#: int settings (``iset``): max substeps, pass limit, predict, iterative, secant, energy, theta_j, theta_i,
+#: contact law present, constraints (m), end evaluation valid (in/out), (unused), drift history, entries of past
+#: (in/out)
+N_ISET = 14
+
+
+@njit(cache=True)
+def sym_eig_max(a, b, c):
+    """Largest eigenvalue of [[a, b], [b, c]] (``master._sym_eig_max``)."""
+    return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
+
+
+@njit(cache=True)
+def substeps(h, x, mobility, limit, cap):
+    """``master.substeps`` for the exchange x (13 fields of ``Exchanged``)."""
+    k = max(sym_eig_max(x[7], x[8], x[9]), 0.0)
+    c = max(sym_eig_max(x[10], x[11], x[12]), 0.0)
+    rate = math.sqrt(k * mobility) + c * mobility
+    return max(1, min(cap, math.ceil(h * rate / limit)))
+
+
+@njit(cache=True)
+def _linear(x, e_x, e_y, v_x, v_y):
+    """``coupling.jacobian._linear``: F_x + K (e - e_x) + C (v - v_x) about the exchange x."""
+    dx, dy, dvx, dvy = e_x - x[1], e_y - x[2], v_x - x[3], v_y - x[4]
+    return (x[5] + x[7] * dx + x[8] * dy + x[10] * dvx + x[11] * dvy,
+            x[6] + x[8] * dx + x[9] * dy + x[11] * dvx + x[12] * dvy)
+
+
+@njit(cache=True)
+def drift_model(past, npast, drift_history, fm):
+    """The force model of ``jacobian-drift`` (pass 0 of ``jacobian-implicit``): ForceModel.linear(past[-1], d)
+    with the previous step's drift d (``InterfaceJacobianDrift.begin_step``) into fm."""
+    ax = ay = 0.0
+    if drift_history and npast == 2:
+        a, b = past[0], past[1]
+        px, py = _linear(a, b[1], b[2], b[3], b[4])
+        dt = b[0] - a[0]
+        ax, ay = (b[5] - px) / dt, (b[6] - py) / dt
+    x = past[npast - 1]
+    fm[0], fm[1], fm[2], fm[3], fm[4], fm[5], fm[6] = x[0], x[5], x[6], ax, ay, 0.0, 0.0
+    fm[7], fm[8], fm[9], fm[10] = x[1], x[2], x[3], x[4]
+    for i in range(6):
+        fm[11 + i] = x[7 + i]
+
+
+@njit(cache=True)
+def trial_model(a, x, jumps, njumps, fm):
+    """``InterfaceJacobianImplicit.begin_step`` with a trial: the mean tangent matrices, the step's own drift
+    through both ends (start exchange a, the last pass's end x) and the onset jumps' quadratic terms, into fm."""
+    m = np.empty(13)
+    m[:7] = a[:7]
+    for i in range(6):
+        m[7 + i] = 0.5 * (a[7 + i] + x[7 + i])
+    px, py = _linear(m, x[1], x[2], x[3], x[4])
+    dt = x[0] - a[0]
+    ax, ay = (x[5] - px) / dt, (x[6] - py) / dt
+    a2x = a2y = 0.0
+    for j in range(njumps):
+        g = 3.0 - 6.0 * jumps[j, 0]
+        ax, ay = ax + g * jumps[j, 1] / dt, ay + g * jumps[j, 2] / dt
+        a2x, a2y = a2x - g * jumps[j, 1] / (dt * dt), a2y - g * jumps[j, 2] / (dt * dt)
+    fm[0], fm[1], fm[2], fm[3], fm[4], fm[5], fm[6] = m[0], m[5], m[6], ax, ay, a2x, a2y
+    fm[7], fm[8], fm[9], fm[10] = m[1], m[2], m[3], m[4]
+    for i in range(6):
+        fm[11 + i] = m[7 + i]
+
+
+@njit(cache=True)
+def converged(a, b, tol, e_scale):
+    """``InterfaceJacobianImplicit.converged``: two passes' end force and eccentricity agree to tol."""
+    f_scale = max(1.0, abs(b[5]), abs(b[6]))
+    return (abs(a[5] - b[5]) <= tol * f_scale and abs(a[6] - b[6]) <= tol * f_scale
+            and abs(a[1] - b[1]) <= tol * e_scale and abs(a[2] - b[2]) <= tol * e_scale)
+
+
+@njit(cache=True)
+def onset_jumps(P, a, cage_a, b, cage_b, jumps):
+    """``coupling.implicit.onset_jumps`` (law P of ``law_kernel.pack_bearing``) into the rows of ``jumps``
+    (theta, J_x, J_y); returns their count. Constant damping only (eq. 18); the oil film has none."""
+    if int(P[3]) != DAMPING_CONSTANT or P[4] == 0.0:
+        return 0
+    nb = int(P[0])
+    C, half = P[4], P[2]
+    count = 0
+    for r in range(nb):
+        pa = cage_a + 2.0 * math.pi * r / nb                      # eq. (17)
+        pb = cage_b + 2.0 * math.pi * r / nb
+        da = a[1] * math.cos(pa) + a[2] * math.sin(pa) - half
+        db = b[1] * math.cos(pb) + b[2] * math.sin(pb) - half
+        if (da > 0.0) == (db > 0.0):
+            continue
+        theta = da / (da - db)
+        phi = pa + theta * (pb - pa)
+        ux, uy = math.cos(phi), math.sin(phi)
+        vr = (a[3] + theta * (b[3] - a[3])) * ux + (a[4] + theta * (b[4] - a[4])) * uy
+        jump = C * max(vr, 0.0) * (1.0 if da <= 0.0 else -1.0)
+        if jump != 0.0:
+            jumps[count, 0], jumps[count, 1], jumps[count, 2] = theta, jump * ux, jump * uy
+            count += 1
+    return count
+
+
+@njit(cache=True)
+def same_jumps(a, na, b, nb, tol=1e-3):
+    """``master._same_jumps``: the same onsets (count, positions, jumps) within tol."""
+    if na != nb:
+        return False
+    for k in range(na):
+        if not (abs(a[k, 0] - b[k, 0]) <= tol and math.hypot(a[k, 1] - b[k, 1], a[k, 2] - b[k, 2])
+                <= tol * math.hypot(b[k, 1], b[k, 2])):
+            return False
+    return True
+
+
+@njit(cache=True)
+def next_pass_negligible(fm, b, mobility, h, tol):
+    """``CouplingLoop._next_pass_negligible`` for this pass's force model fm and its end exchange b."""
+    if mobility <= 0.0:
+        return False
+    fx, fy = force_of_model(fm, b[0], b[1], b[2], b[3], b[4])
+    d = math.hypot(b[5] - fx, b[6] - fy) * mobility
+    de, dv = d * h * h / 6.0, d * h / 2.0
+    k = max(sym_eig_max(b[7], b[8], b[9]), 0.0)
+    c = max(sym_eig_max(b[10], b[11], b[12]), 0.0)
+    return (k * de + c * dv <= tol * max(1.0, abs(b[5]), abs(b[6]))
+            and de <= tol * max(1e-6, math.hypot(b[1], b[2])))
+
+
+@njit(cache=True)
+def k1_valid(fm, t0, xin, xf):
+    """``CouplingLoop._k1_valid`` once the stored end evaluation belongs to (y, t0)."""
+    if fm[0] != t0 or fm[1] != xf[0] or fm[2] != xf[1]:
+        return False
+    if fm[7] == xin[0] and fm[8] == xin[1] and fm[9] == xin[2] and fm[10] == xin[3]:
+        return True
+    for i in range(11, 17):
+        if fm[i] != 0.0:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _push(past, npast, x):
+    """Append x to the exchange history (2 kept); returns the new count."""
+    if npast == 2:
+        past[0, :] = past[1, :]
+        past[1, :] = x
+        return 2
+    past[npast, :] = x
+    return npast + 1
+
+
+@njit(cache=True)
+def _fail(fail, code, step, t, v0=0.0, v1=0.0, v2=0.0, v3=0.0, v4=0.0, v5=0.0):
+    fail[0], fail[1], fail[2] = code, step, t
+    fail[3], fail[4], fail[5], fail[6], fail[7], fail[8] = v0, v1, v2, v3, v4, v5
+
+
+@njit(cache=True)
+def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, stages, probes, scale, react,
+              data, cols, P, cs, PC, PE, past, xin, xf, integrals, counts, fset, iset, sent, fail):
+    """Communication steps ``first`` .. ``last`` from the state y at t = (first - 1) h; returns the state
+    reached (the last step's end, or the start of the step that failed: ``fail[0]`` != OK then).
+
+    ``data``: the sample table (rows appended at counts[8], every ``every``-th step); ``cols``: columns of
+    omega_inner, omega_outer, kinetic_energy, the 6 energy columns (-1: no account) and the component's samples.
+    ``P``: the component's law, ``cs`` its state (``component_kernel``); ``PC``: the contact law locating onsets
+    (empty: none); ``PE``: the energy account's law. ``past`` (2 x 13) with iset[13] entries, ``xin`` and
+    ``xf``: the history, last inputs and force of the loop (updated in place). ``sent``: the last inputs sent.
+    """
+    mobility, sub_limit, max_cv, tol = fset[0], fset[1], fset[2], fset[3]
+    max_sub, limit, predict, iterative, secant = iset[0], iset[1], iset[2] != 0, iset[3] != 0, iset[4] != 0
+    energy, tj, ti, has_law, constrained = iset[5] != 0, iset[6], iset[7], iset[8] != 0, iset[9] != 0
+    drift_history = iset[12] != 0
+    nb_c = int(PC[0]) if PC.shape[0] > 0 else 0
+    jumps = np.zeros((max(nb_c, 1), 3))
+    trial_jumps = np.zeros((max(nb_c, 1), 3))
+    fm = np.zeros(17)
+    x = np.zeros(13)
+    start = np.zeros(13)
+    prev = np.zeros(13)
+    trial = np.zeros(13)
+    snap_past = np.zeros((2, 13))
+    snap_xin = np.zeros(6)
+    snap_xf = np.zeros(2)
+    snap_cs = np.zeros(cs.shape[0])
+    no_row = np.zeros(0)
+    npast = iset[13]
+    ns = cols.shape[0] - 9
+    ecc_limit = fset[13]
+    for step in range(first, last + 1):
+        t0 = (step - 1) * h
+        t = step * h
+        start[:] = past[npast - 1]
+        cage_start = 0.0
+        if has_law:   # energy.kinematic_cage_angle
+            cage_start = fset[5] + ((y[tj] - fset[6]) * PC[11] + (y[ti] - fset[7]) * PC[12])
+        snap_npast = npast
+        if iterative:
+            snap_past[:, :] = past
+            snap_xin[:] = xin
+            snap_xf[:] = xf
+            snap_cs[:] = cs
+        have_prev = False
+        have_trial = False
+        ntrial = 0
+        passes = 0
+        m = 1
+        hs = h
+        y_end = y
+        for passes in range(1, (limit if iterative else 1) + 1):
+            if have_trial:
+                trial_model(past[npast - 1], trial, trial_jumps, ntrial, fm)
+            else:
+                drift_model(past, npast, drift_history, fm)
+            m = substeps(h, past[npast - 1], mobility, sub_limit, max_sub)
+            counts[0] = max(counts[0], m)
+            counts[1] += m
+            hs = h / m
+            k1v = iset[10] != 0 and k1_valid(fm, t0, xin, xf)
+            # with the account's arrays also without an account (one specialisation to compile): the powers and
+            # stages are computed and not used, the state and the inputs are the same
+            acc[:] = 0.0
+            y_end, drift, finite = advance(y, t0, hs, m, t, fm, dy, k1v, I, R, L, LR, W, u, acc, p1, stages)
+            if not finite:
+                _fail(fail, NOT_FINITE, step, t)
+                return y
+            if constrained:
+                fset[4] = drift
+                if drift > max_cv:
+                    _fail(fail, CONSTRAINT, step, t, drift)
+                    return y
+            for i in range(6):
+                sent[i] = u[i]
+            if secant:   # BearingLink.secant_ring_speeds
+                sent[4] = (y_end[tj] - y[tj]) / h
+                sent[5] = (y_end[ti] - y[ti]) / h
+            if law_exchange(P, ecc_limit, cs, h, sent) != 0:
+                _fail(fail, INPUTS, step, t, sent[0], sent[1], sent[2], sent[3], sent[4], sent[5])
+                return y
+            counts[7] += 1
+            s = 0.0
+            for k in range(8):
+                s += cs[CS_OUT + k]
+            if not math.isfinite(s):
+                _fail(fail, FORCE, step, t, cs[CS_OUT], cs[CS_OUT + 1])
+                return y
+            x[0] = t
+            for i in range(4):
+                x[1 + i] = u[i]
+            for k in range(8):
+                x[5 + k] = cs[CS_OUT + k]
+            npast = _push(past, npast, x)
+            iset[13] = npast
+            for i in range(6):
+                xin[i] = u[i]
+            xf[0], xf[1] = cs[CS_OUT], cs[CS_OUT + 1]
+            if not iterative:
+                break
+            end = past[npast - 1]
+            if have_prev and converged(prev, end, tol, max(1e-6, math.hypot(end[1], end[2]))):
+                break
+            if passes == limit:
+                counts[5] += 1
+                break
+            nj = 0
+            if has_law:
+                cage_end = fset[5] + ((y_end[tj] - fset[6]) * PC[11] + (y_end[ti] - fset[7]) * PC[12])
+                nj = onset_jumps(PC, start, cage_start, end, cage_end, jumps)
+            if predict and ((nj == 0) if passes == 1 else same_jumps(jumps, nj, trial_jumps, ntrial)) \
+                    and next_pass_negligible(fm, end, mobility, h, tol):
+                counts[6] += 1
+                break
+            prev[:] = end
+            have_prev = True
+            trial[:] = end
+            past[:, :] = snap_past
+            npast = snap_npast
+            iset[13] = npast
+            xin[:] = snap_xin
+            xf[:] = snap_xf
+            cs[:] = snap_cs
+            trial_jumps[:nj] = jumps[:nj]
+            ntrial = nj
+            have_trial = True
+        if energy:   # the accepted pass's integrals (CouplingLoop._integrate_energy)
+            d_, wc = stage_integrals(PE, stages, m, hs, fset[9])
+            integrals[0] += d_
+            integrals[1] += acc[0]
+            integrals[2] += wc
+            integrals[3] += acc[1]
+            integrals[4] += acc[2]
+        if iterative:
+            counts[2] += 1
+            counts[3] += passes
+            counts[4] = max(counts[4], passes)
+        y = y_end
+        record = step % every == 0
+        row = data[counts[8]] if record else no_row
+        finish(y, xin[0], xin[1], xf[0], xf[1], I, R, L, LR, W, u, dy, lam, row, probes, scale, t, fset[4], react, p1)
+        iset[10] = 1
+        if record:
+            counts[8] += 1
+            # the component's samples (InProcessEndpoint.sample): cage angle, loaded balls, max load, ball loads
+            if ns > 0:
+                row[cols[9]] = cs[CS_CAGE]
+                row[cols[10]] = cs[CS_OUT + 8]
+                row[cols[11]] = cs[CS_OUT + 9]
+                for r in range(ns - 3):
+                    row[cols[12 + r]] = cs[CS_LOADS + r]
+            if energy:   # EnergyAccount.update with the integrals
+                kinetic = row[cols[2]]
+                cage = fset[10] + ((y[tj] - fset[11]) * PE[11] + (y[ti] - fset[12]) * PE[12])
+                potential = elastic_energy(PE, u[0], u[1], cage)
+                row[cols[3]] = potential
+                row[cols[4]] = integrals[0]
+                row[cols[5]] = integrals[1]
+                row[cols[6]] = integrals[2]
+                row[cols[7]] = integrals[3]
+                row[cols[8]] = (kinetic + potential + integrals[0] - integrals[1] - integrals[3] - integrals[2]
+                                - fset[8])
+            if secant:
+                row[cols[0]], row[cols[1]] = sent[4], sent[5]
+    fail[0] = OK
+    return y

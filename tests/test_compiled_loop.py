@@ -1,0 +1,227 @@
+"""The compiled communication step (mechanism.cosim.compiled_loop) against the Python loop, its reference.
+
+The same RunConfig runs with ``MasterSettings.compiled_loop`` False (``run_master`` + ``CouplingLoop``) and
+True; every column of the sample table, the meta (counters, life outputs, energy figures, failure) and the
+status must agree. Its pieces are held against their homes: ``life_add`` against
+``fmu_bearing.life.LifeAccumulator.add``, ``onset_jumps`` against ``coupling.implicit.onset_jumps``.
+"""
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import pytest
+
+from fmu_bearing import life
+from fmu_bearing.ball_bearing import BallBearing
+from fmu_bearing.parameters import BearingParameters
+from mechanism import run as run_module
+from mechanism.cosim import compiled_driver, compiled_loop, component_kernel
+from mechanism.cosim.coupling import Exchanged
+from mechanism.cosim.coupling.implicit import onset_jumps
+from mechanism.cosim.endpoints import InProcessEndpoint
+from mechanism.cosim.joint import BearingLink
+from mechanism.cosim.law_kernel import pack_bearing
+from mechanism.cosim.master import MasterSettings, RunFailure, run_master
+from mechanism.multibody.solver import System
+from mechanism.run import RunConfig, run
+from mechanism.systems.slider_crank import (
+    SliderCrankParameters,
+    build,
+    initial_state,
+    slider_crank_observer,
+)
+
+RTOL = 1e-9
+
+
+def _run(config: RunConfig, compiled: bool, monkeypatch) -> tuple:
+    """The run with the compiled loop on or off, and how many chunks the compiled loop ran."""
+    chunks = []
+    original = compiled_driver.CompiledLoop.run
+
+    def counted(self, first, last, y):
+        chunks.append((first, last))
+        return original(self, first, last, y)
+
+    with monkeypatch.context() as m:
+        m.setattr(run_module, "MasterSettings", functools.partial(MasterSettings, compiled_loop=compiled))
+        m.setattr(compiled_driver.CompiledLoop, "run", counted)
+        return run(config), len(chunks)
+
+
+def _close(a, b) -> bool:
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_close(a[k], b[k]) for k in a)
+    if isinstance(a, float) and isinstance(b, float):
+        return a == b or math.isclose(a, b, rel_tol=RTOL, abs_tol=0.0)
+    return a == b
+
+
+def _compare(config: RunConfig, monkeypatch):
+    ref, n_ref = _run(config, False, monkeypatch)
+    new, n_new = _run(config, True, monkeypatch)
+    assert n_ref == 0 and n_new > 0                       # each path ran the loop it names
+    assert (new.status, new.message) == (ref.status, ref.message)
+    assert new.columns == ref.columns
+    assert new.data.shape == ref.data.shape
+    for k, column in enumerate(ref.columns):
+        np.testing.assert_allclose(new.data[:, k], ref.data[:, k], rtol=RTOL, atol=0.0, equal_nan=True,
+                                   err_msg=column)
+    peak = [float(np.max(np.hypot(r["F_x"], r["F_y"]))) for r in (ref, new)]
+    assert math.isclose(peak[1], peak[0], rel_tol=RTOL)
+    assert new.meta.keys() == ref.meta.keys()
+    for key in ref.meta:
+        assert _close(new.meta[key], ref.meta[key]), key
+    return ref, new
+
+
+def test_default_run_with_the_energy_account(monkeypatch):
+    """1200 rpm, 8 balls, C = 50 N s/m, 0.1 rev: samples, counters, life outputs and energy meta agree."""
+    ref, _ = _compare(RunConfig(mode="inprocess", rpm=1200, revs=0.1, step=1e-5, progress=False,
+                                settings={"damping_model": 1, "damping_coefficient": 50}), monkeypatch)
+    assert ref.has("energy_residual") and "energy_residual_coupling_J" in ref.meta   # mechanism.run's account
+    assert ref.meta["iteration_passes_max"] >= 2 and ref.meta["iteration_predicted"] > 0
+    assert ref.meta["life_outputs"]["equivalent_load_inner"] > 0
+
+
+def test_twenty_balls_undamped_every_third_step(monkeypatch):
+    """300 rpm, 20 (overlapping) balls, no damping, a sample every 3rd step."""
+    ref, _ = _compare(RunConfig(mode="inprocess", rpm=300, revs=0.05, balls=20, record_every=3, progress=False,
+                                settings={"allow_ball_overlap": True, "damping_model": 0}), monkeypatch)
+    assert ref.has("ball_load_20") and len(ref["time"]) == 1 + 1000 // 3
+
+
+def test_oil_film_and_substeps(monkeypatch):
+    """The oil-film damping (eq. 29-32: no onset jumps) and several RK4 substeps per step."""
+    ref, _ = _compare(RunConfig(mode="inprocess", rpm=1200, revs=0.03, progress=False,
+                                settings={"damping_model": 2}), monkeypatch)
+    assert ref.meta["substeps_max"] > 1
+
+
+def test_large_step_not_converged(monkeypatch):
+    """A step of 1e-4 s: substeps, max_iterations reached (not converged) on many steps."""
+    ref, _ = _compare(RunConfig(mode="inprocess", rpm=1200, revs=0.05, step=1e-4, progress=False), monkeypatch)
+    assert ref.meta["iteration_not_converged"] > 0
+
+
+@pytest.mark.parametrize("scheme", ["jacobian", "jacobian-drift", "jacobian-secant"])
+def test_explicit_interface_jacobian_schemes(scheme, monkeypatch):
+    ref, _ = _compare(RunConfig(mode="inprocess", rpm=1200, revs=0.02, scheme=scheme, record_every=2,
+                                progress=False), monkeypatch)
+    assert "iteration_passes_mean" not in ref.meta
+
+
+@pytest.mark.parametrize("settings, step", [({"eccentricity_limit": 1.5e-5}, 1e-5), ({}, 4e-4)])
+def test_failure_is_reported_alike(settings, step, monkeypatch):
+    """A run stopped by the component (|e| beyond the limit): the same step, time, cause and kept rows."""
+    ref, new = _compare(RunConfig(mode="inprocess", rpm=1200, revs=0.1, step=step, settings=settings,
+                                  progress=False), monkeypatch)
+    assert ref.status == "failed" and "eccentricity" in ref.meta["failure"]["cause"]
+    assert new.meta["failure"] == ref.meta["failure"]
+
+
+def test_other_paths_run_the_python_loop(monkeypatch):
+    """A scheme the compiled loop does not implement, or the kernels off, fall back to the Python loop."""
+    cfg = RunConfig(mode="inprocess", rpm=1200, revs=0.01, scheme="extrap1", progress=False)
+    result, chunks = _run(cfg, True, monkeypatch)
+    assert result.ok and chunks == 0
+    monkeypatch.setattr(compiled_driver.CompiledLoop, "__init__", None)    # would fail if used
+    settings = functools.partial(MasterSettings, kernels=False)
+    with monkeypatch.context() as m:
+        m.setattr(run_module, "MasterSettings", settings)
+        assert run(RunConfig(mode="inprocess", rpm=1200, revs=0.005, progress=False)).ok
+
+
+def test_life_add_matches_the_accumulator():
+    """``component_kernel.life_add`` against ``LifeAccumulator.add`` (ISO/TS 16281), both ring branches."""
+    rng = np.random.default_rng(3)
+    params = BearingParameters()
+    acc = life.LifeAccumulator(life.LoadRatings.of_bearing(params))
+    z = acc.n_balls
+    sums = np.zeros(4)
+    for k in range(200):
+        loads = np.where(rng.random(z) < 0.5, 0.0, rng.random(z) * 500.0)
+        wi, wo = rng.normal(0, 100.0, 2)
+        if k % 7 == 0:
+            loads[:] = 0.0
+        acc.add(loads.tolist(), wi, wo, 1e-5)
+        component_kernel.life_add(loads, sums, z, wi, wo, 1e-5)
+        np.testing.assert_allclose(sums, acc.state(), rtol=1e-14, atol=0.0)
+
+
+def test_onset_jumps_match_the_scheme():
+    """``compiled_loop.onset_jumps`` against ``coupling.implicit.onset_jumps`` over random step ends."""
+    bearing = BallBearing(BearingParameters(damping_model=1, damping_coefficient=50.0))
+    P = pack_bearing(bearing)
+    rng = np.random.default_rng(5)
+    half = bearing.half_clearance
+    jumps = np.zeros((bearing.n_balls, 3))
+    found = 0
+    for _ in range(300):
+        e = rng.normal(0.0, 1.5 * half, 4)
+        v = rng.normal(0.0, 0.05, 4)
+        a = Exchanged(0.0, e[0], e[1], v[0], v[1], 0.0, 0.0)
+        b = Exchanged(1e-5, e[2], e[3], v[2], v[3], 0.0, 0.0)
+        cage_a, cage_b = rng.uniform(0, 6.3), rng.uniform(0, 6.3)
+        expected = onset_jumps(bearing, a, cage_a, b, cage_b)
+        xa = np.array([a.t, a.e_x, a.e_y, a.v_x, a.v_y] + [0.0] * 8)
+        xb = np.array([b.t, b.e_x, b.e_y, b.v_x, b.v_y] + [0.0] * 8)
+        count = compiled_loop.onset_jumps(P, xa, cage_a, xb, cage_b, jumps)
+        assert count == len(expected)
+        np.testing.assert_allclose(jumps[:count], np.array(expected).reshape(-1, 3), rtol=1e-13, atol=0.0)
+        found += count
+    assert found > 50
+
+
+@pytest.mark.parametrize("with_law, options", [(False, {}), (True, {}),
+                                               (True, {"iterate_where_needed": False, "max_iterations": 3})])
+def test_without_energy_account(with_law, options):
+    """``run_master`` without an energy account, with and without the contact law locating onsets, and
+    iterating until two passes agree (no prediction) with at most 3 passes."""
+    params = SliderCrankParameters(rpm=1200)
+    model = build(params, "bearing")
+    system = System(model)
+    q0, qd0 = initial_state(system, params)
+    results = []
+    for compiled in (False, True):
+        endpoint = InProcessEndpoint({"damping_model": 1, "damping_coefficient": 50.0})
+        settings = MasterSettings(t_end=0.02 * 60 / 1200, step=1e-5, progress=False, compiled_loop=compiled,
+                                  **options)
+        results.append(run_master(system, q0, qd0, settings, slider_crank_observer(system),
+                                  link=BearingLink(system, model.bearings[0]), endpoint=endpoint,
+                                  contact_law=endpoint.bearing if with_law else None))
+    ref, new = results
+    assert ref.ok and new.ok and not ref.has("energy_residual")
+    np.testing.assert_allclose(new.data, ref.data, rtol=RTOL, atol=0.0)
+    assert all(_close(new.meta[k], ref.meta[k]) for k in ref.meta) and new.meta.keys() == ref.meta.keys()
+
+
+def test_the_poll_between_chunks_stops_the_run_alike():
+    """The observer's poll (mechanism.run's signal check) runs every 500 steps; raising there stops both loops
+    at the same step with the same rows."""
+    params = SliderCrankParameters(rpm=1200)
+    model = build(params, "bearing")
+    system = System(model)
+    q0, qd0 = initial_state(system, params)
+    inner = slider_crank_observer(system)
+
+    def observe(q, qd, qdd, lam, t):
+        return inner(q, qd, qdd, lam, t)
+
+    def poll(t):
+        if t > 0.0045:
+            raise RunFailure(-1, t, "interrupted by SIGINT")
+
+    observe.probes, observe.poll = inner.probes, poll
+    results = []
+    for compiled in (False, True):
+        endpoint = InProcessEndpoint({"damping_model": 1, "damping_coefficient": 50.0})
+        settings = MasterSettings(t_end=0.2 * 60 / 1200, step=1e-5, progress=False, compiled_loop=compiled)
+        results.append(run_master(system, q0, qd0, settings, observe, link=BearingLink(system, model.bearings[0]),
+                                  endpoint=endpoint, contact_law=endpoint.bearing))
+    ref, new = results
+    assert ref.status == new.status == "failed" and new.message == ref.message
+    assert new.meta["failure"] == ref.meta["failure"] and len(ref.data) == 501
+    np.testing.assert_array_equal(new.data, ref.data)
