@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 from mechanism.cosim.coupling import DEFAULT_SCHEME, SCHEMES
 from mechanism.cosim.joint import CONTACT_POINTS
-from mechanism.run import parse_setting
+from mechanism.run import DEFAULT_STEP, parse_setting
 
 if TYPE_CHECKING:
     from mechanism.run import RunConfig
@@ -47,11 +47,12 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mode", choices=("cosim", "inprocess", "monolithic"), default="cosim",
                    help="cosim: through the FMU via fmpy; inprocess: same master, force law in-process; "
                         "monolithic: scipy stiff integrator reference")
-    p.add_argument("--step", type=float, default=1e-5, help="communication step [s] (default 1e-5)")
+    p.add_argument("--step", type=float, default=DEFAULT_STEP,
+                   help=f"communication step [s] (default {DEFAULT_STEP:g}; docs/coupling.md, 'The default step')")
     p.add_argument("--output-interval", type=float, default=1e-5, help="sampling interval [s] (default 1e-5)")
     p.add_argument("--record-every", type=int, default=None, metavar="N",
                    help="record every N-th communication step (sets --output-interval to N * step; default: "
-                        "every step at the default step)")
+                        "every 1e-5 s, i.e. every 2nd step at the default step)")
     p.add_argument("--set", dest="settings", action="append", type=parse_setting, default=[],
                    metavar="NAME=VALUE", help="start value of a bearing-component parameter (repeatable)")
     p.add_argument("--scheme", choices=tuple(SCHEMES), default=DEFAULT_SCHEME,
