@@ -88,7 +88,7 @@ def test_default_run_with_the_energy_account(monkeypatch):
 
 def test_twenty_balls_undamped_every_third_step(monkeypatch):
     """300 rpm, 20 (overlapping) balls, no damping, a sample every 3rd step."""
-    ref, _ = _compare(RunConfig(mode="inprocess", rpm=300, revs=0.05, balls=20, record_every=3, progress=False,
+    ref, _ = _compare(RunConfig(mode="inprocess", rpm=300, revs=0.05, step=1e-5, balls=20, record_every=3, progress=False,
                                 settings={"allow_ball_overlap": True, "damping_model": 0}), monkeypatch)
     assert ref.has("ball_load_20") and len(ref["time"]) == 1 + 1000 // 3
 

@@ -41,7 +41,7 @@ def test_life_study_refuses_an_unstable_step(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def runs(ball_bearing_fmu):
     from mechanism.run import RunConfig, run
-    base = RunConfig(rpm=1200.0, revs=0.2, progress=False, fmu=str(ball_bearing_fmu))
+    base = RunConfig(rpm=1200.0, revs=0.2, step=1e-5, progress=False, fmu=str(ball_bearing_fmu))   # a sample every step
     from dataclasses import replace
     return {mode: run(replace(base, mode=mode)) for mode in ("cosim", "inprocess", "monolithic")}
 
@@ -61,7 +61,7 @@ def test_fmi3_fmu_reports_the_same_life(runs, tmp_path_factory):
     from mechanism.output.results import summary
     from mechanism.run import RunConfig, run
     fmu3 = built_fmu("BallBearing3", tmp_path_factory)
-    r3 = run(RunConfig(rpm=1200.0, revs=0.2, progress=False, fmu=str(fmu3)))
+    r3 = run(RunConfig(rpm=1200.0, revs=0.2, step=1e-5, progress=False, fmu=str(fmu3)))
     life3, life2 = summary(r3)["life"], summary(runs["cosim"])["life"]
     assert life3["source"] == "component outputs"
     for key in ("dynamic_load_rating_N", "equivalent_load_inner_N", "equivalent_load_outer_N", "rating_life_h"):
