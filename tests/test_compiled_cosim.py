@@ -83,6 +83,15 @@ def test_explicit_scheme_saves_no_state(ball_bearing_fmu, monkeypatch):
     assert "iteration_passes_mean" not in ref.meta and loop.states == (0, 0)
 
 
+@pytest.mark.parametrize("scheme", ["zoh", "extrap1", "extrap2", "zoh-jacobi"])
+def test_force_held_schemes(ball_bearing_fmu, scheme, monkeypatch):
+    """The schemes of the step-size study that hold or extrapolate the force (Jacobi ordering: the FMU steps
+    first, with the last inputs), 300 rpm, C = 50 N s/m, a sample every 2nd step."""
+    ref, _, loop = _compare(_cosim(ball_bearing_fmu, rpm=300, revs=0.02, scheme=scheme, record_every=2,
+                                   settings={"damping_model": 1, "damping_coefficient": 50}), monkeypatch)
+    assert loop.states == (0, 0) and ref.meta["component_calls"] > 0
+
+
 @pytest.mark.parametrize("settings, step", [({"eccentricity_limit": 1.5e-5}, 1e-5), ({}, 4e-4)])
 def test_failure_is_reported_alike(ball_bearing_fmu, settings, step, monkeypatch):
     """The FMU refuses |e| beyond its limit: the same step, time, cause (the FMU's logged message), the rows

@@ -21,8 +21,10 @@ from mechanism.cosim.coupling import Exchanged
 from mechanism.cosim.endpoints import ExchangeError
 from mechanism.cosim.law_kernel import pack_bearing
 
-#: the schemes the compiled loop implements (their force models: ``compiled_loop.drift_model``, ``trial_model``)
-SCHEMES = ("jacobian", "jacobian-drift", "jacobian-secant", "jacobian-implicit")
+#: the schemes the compiled loop implements (their force models: ``compiled_loop.drift_model``, ``trial_model``,
+#: ``hold_model``)
+SCHEMES = ("jacobian", "jacobian-drift", "jacobian-secant", "jacobian-implicit", "zoh", "extrap1", "extrap2",
+           "zoh-jacobi")
 
 
 #: what the compiled loop calls of the FMU's (a handle without one of them: the Python loop runs)
@@ -49,7 +51,7 @@ def eligible(loop) -> bool:
     scheme = loop.scheme
     return bool(getattr(loop.settings, "compiled_loop", False) and loop.kernels and loop._observe_in_kernel
                 and loop.link is not None and component_kind(loop.endpoint) is not None
-                and scheme is not None and scheme.name in SCHEMES and scheme.ordering == "gauss-seidel"
+                and scheme is not None and scheme.name in SCHEMES
                 and (loop.energy is None or loop.integrals is not None))
 
 
@@ -102,7 +104,10 @@ class CompiledLoop:
         iset[10] = loop._end[0] is y and loop._end[1] == 0.0
         iset[11] = self.kind
         iset[12] = scheme.history == 2
-        self.past = np.zeros((2, 13))
+        iset[14] = cl.MODELS.get(scheme.name.replace("-jacobi", ""), 0)
+        iset[15] = scheme.ordering == "jacobi"
+        iset[16] = scheme.history
+        self.past = np.zeros((3, 13))
         for k, x in enumerate(scheme.past):
             self.past[k] = (x.t, x.e_x, x.e_y, x.v_x, x.v_y, x.F_x, x.F_y, x.k_xx, x.k_xy, x.k_yy, x.c_xx,
                             x.c_xy, x.c_yy)

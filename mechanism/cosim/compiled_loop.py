@@ -1,13 +1,15 @@
 """The whole fixed-step communication step compiled (numba): a chunk of steps of ``run_master`` in one call.
 
 A second implementation of what ``master.run_master`` + ``CouplingLoop.communicate`` do per step for the
-interface-Jacobian schemes ``jacobian-drift``, ``jacobian-secant`` and ``jacobian-implicit``
-(``mechanism.cosim.coupling``) with the in-process component (``component_kernel.law_exchange``) or an FMI 2.0
+interface-Jacobian schemes ``jacobian``, ``jacobian-drift``, ``jacobian-secant`` and ``jacobian-implicit`` and the
+force-held schemes ``zoh``, ``extrap1``, ``extrap2`` and ``zoh-jacobi`` (``mechanism.cosim.coupling``) with the in-process component (``component_kernel.law_exchange``) or an FMI 2.0
 FMU called natively (``fmu_native``; ``component_call`` picks by ``kind``), held against that Python loop (the
 reference) by tests/test_compiled_loop.py and tests/test_compiled_cosim.py, with the same order of operations:
 
 * the scheme's force model (``InterfaceJacobianDrift.begin_step`` / ``InterfaceJacobianImplicit.begin_step``,
-  17 coefficients of ``ForceModel``), the RK4 substeps of ``master.substeps``;
+  ``ZeroOrderHold``, ``LinearExtrapolation``, ``QuadraticExtrapolation``: 17 coefficients of ``ForceModel``), the
+  RK4 substeps of ``master.substeps`` (one for the force-held schemes); Jacobi ordering (``zoh-jacobi``): the
+  component steps first, with the last inputs;
 * a pass: ``kernels.advance`` (with the energy account's stages), the divergence checks, the secant ring
   speeds (``BearingLink.secant_ring_speeds``), the exchange, the push of the new ``Exchanged``;
 * the iteration of ``jacobian-implicit``: rollback (the component's state saved once per step and restored
@@ -19,7 +21,8 @@ reference) by tests/test_compiled_loop.py and tests/test_compiled_cosim.py, with
   the component's samples (cage angle, loaded balls, max ball load, ball loads), the energy account's
   columns (``EnergyAccount.update`` with the integrals), the ring speeds sent.
 
-The exchange history is an array ``past`` (2 x 13, the fields of ``Exchanged`` in order) with its count.
+The exchange history is an array ``past`` (3 x 13, the fields of ``Exchanged`` in order) with its count (at most
+the scheme's ``history``).
 The driver (``mechanism.cosim.compiled_driver``) packs the Python objects into arrays and back.
 """
 from __future__ import annotations
@@ -50,8 +53,10 @@ N_COUNTS = 11
 N_FSET = 14
 #: int settings (``iset``): max substeps, pass limit, predict, iterative, secant, energy, theta_j, theta_i,
 #: contact law present, constraints (m), end evaluation valid (in/out), component kind (``component_call``),
-#: drift history, entries of past (in/out)
-N_ISET = 14
+#: drift history, entries of past (in/out), force model (``MODELS``), Jacobi ordering, the scheme's history
+N_ISET = 17
+#: force models (iset[14]): the interface-Jacobian ones (``drift_model``, ``trial_model``), ``hold_model``'s
+MODELS = {"jacobian": 0, "zoh": 1, "extrap1": 2, "extrap2": 3}
 
 
 @njit(cache=True)
@@ -83,7 +88,7 @@ def drift_model(past, npast, drift_history, fm):
     with the previous step's drift d (``InterfaceJacobianDrift.begin_step``) into fm."""
     ax = ay = 0.0
     if drift_history and npast == 2:
-        a, b = past[0], past[1]
+        a, b = past[npast - 2], past[npast - 1]
         px, py = _linear(a, b[1], b[2], b[3], b[4])
         dt = b[0] - a[0]
         ax, ay = (b[5] - px) / dt, (b[6] - py) / dt
@@ -92,6 +97,29 @@ def drift_model(past, npast, drift_history, fm):
     fm[7], fm[8], fm[9], fm[10] = x[1], x[2], x[3], x[4]
     for i in range(6):
         fm[11 + i] = x[7 + i]
+
+
+@njit(cache=True)
+def hold_model(model, past, npast, fm):
+    """The force models of the force-held schemes into fm: ``zoh`` (``ZeroOrderHold``: F_n held), ``extrap1``
+    (``LinearExtrapolation``: F_n + (F_n - F_{n-1}) (tau - t_n) / (t_n - t_{n-1})), ``extrap2``
+    (``QuadraticExtrapolation``: the Newton form through the last three forces), lower order until the history
+    exists (``model``: their ``MODELS`` codes)."""
+    fm[:] = 0.0
+    c = past[npast - 1]
+    fm[0], fm[1], fm[2] = c[0], c[5], c[6]
+    if model == 2 or (model == 3 and npast == 2):
+        if npast >= 2:
+            b = past[npast - 2]
+            dt = c[0] - b[0]
+            fm[3], fm[4] = (c[5] - b[5]) / dt, (c[6] - b[6]) / dt
+    elif model == 3 and npast == 3:
+        a, b = past[0], past[1]
+        cbx, cby = (c[5] - b[5]) / (c[0] - b[0]), (c[6] - b[6]) / (c[0] - b[0])
+        bax, bay = (b[5] - a[5]) / (b[0] - a[0]), (b[6] - a[6]) / (b[0] - a[0])
+        qx, qy = (cbx - bax) / (c[0] - a[0]), (cby - bay) / (c[0] - a[0])
+        w = c[0] - b[0]
+        fm[3], fm[4], fm[5], fm[6] = cbx + qx * w, cby + qy * w, qx, qy
 
 
 @njit(cache=True)
@@ -191,12 +219,13 @@ def k1_valid(fm, t0, xin, xf):
 
 
 @njit(cache=True)
-def _push(past, npast, x):
-    """Append x to the exchange history (2 kept); returns the new count."""
-    if npast == 2:
-        past[0, :] = past[1, :]
-        past[1, :] = x
-        return 2
+def _push(past, npast, x, history):
+    """Append x to the exchange history (``history`` kept: the scheme's deque); returns the new count."""
+    if npast == history:
+        for k in range(history - 1):
+            past[k, :] = past[k + 1, :]
+        past[history - 1, :] = x
+        return history
     past[npast, :] = x
     return npast + 1
 
@@ -216,6 +245,20 @@ def _release(kind, H, state, counts) -> int:
 
 
 @njit(cache=True)
+def _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, t, fail, counts) -> bool:
+    """The component's exchange (``component_call.exchange``), counted; False (``fail`` set) if refused."""
+    status = cc.exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out)
+    if status < 0 or status > 1:
+        if kind == cc.IN_PROCESS:
+            _fail(fail, INPUTS, step, t, sent[0], sent[1], sent[2], sent[3], sent[4], sent[5])
+        else:
+            _fail(fail, COMPONENT, step, t, status, DO_STEP)
+        return False
+    counts[7] += 1
+    return True
+
+
+@njit(cache=True)
 def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, stages, probes, scale, react,
               data, cols, P, cs, H, vr_in, vr_out, vr_real, vr_int, vr_bool, PC, PE, past, xin, xf, integrals,
               counts, fset, iset, sent, fail):
@@ -227,7 +270,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
     The component (``component_call``, kind iset[11]): in-process ``P``, its law, and ``cs``, its state
     (``component_kernel``); an FMU: the handle ``H`` and the value references of its inputs, coupling outputs and
     sampled reals, integers and booleans (``fmu_native.endpoint_references``). ``PC``: the contact law locating
-    onsets (empty: none); ``PE``: the energy account's law. ``past`` (2 x 13) with iset[13] entries, ``xin`` and
+    onsets (empty: none); ``PE``: the energy account's law. ``past`` (3 x 13) with iset[13] entries, ``xin`` and
     ``xf``: the history, last inputs and force of the loop (updated in place). ``sent``: the last inputs sent.
     """
     mobility, sub_limit, max_cv, tol = fset[0], fset[1], fset[2], fset[3]
@@ -235,6 +278,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
     energy, tj, ti, has_law, constrained = iset[5] != 0, iset[6], iset[7], iset[8] != 0, iset[9] != 0
     drift_history = iset[12] != 0
     kind = iset[11]
+    model, jacobi, history = iset[14], iset[15] != 0, iset[16]
     nb_c = int(PC[0]) if PC.shape[0] > 0 else 0
     jumps = np.zeros((max(nb_c, 1), 3))
     trial_jumps = np.zeros((max(nb_c, 1), 3))
@@ -243,7 +287,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
     start = np.zeros(13)
     prev = np.zeros(13)
     trial = np.zeros(13)
-    snap_past = np.zeros((2, 13))
+    snap_past = np.zeros_like(past)
     snap_xin = np.zeros(6)
     snap_xf = np.zeros(2)
     snap_cs = np.zeros(cs.shape[0])
@@ -279,11 +323,19 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
         hs = h
         y_end = y
         for passes in range(1, (limit if iterative else 1) + 1):
-            if have_trial:
+            if jacobi:   # the component steps first, with the last inputs (master.CouplingLoop.advance)
+                for i in range(6):
+                    sent[i] = xin[i]
+                if not _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, t, fail,
+                                 counts):
+                    return y
+            if model != 0:
+                hold_model(model, past, npast, fm)
+            elif have_trial:
                 trial_model(past[npast - 1], trial, trial_jumps, ntrial, fm)
             else:
                 drift_model(past, npast, drift_history, fm)
-            m = substeps(h, past[npast - 1], mobility, sub_limit, max_sub)
+            m = substeps(h, past[npast - 1], mobility, sub_limit, max_sub) if model == 0 else 1
             counts[0] = max(counts[0], m)
             counts[1] += m
             hs = h / m
@@ -304,21 +356,17 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                     if iterative:
                         _release(kind, H, state, counts)
                     return y
-            for i in range(6):
-                sent[i] = u[i]
-            if secant:   # BearingLink.secant_ring_speeds
-                sent[4] = (y_end[tj] - y[tj]) / h
-                sent[5] = (y_end[ti] - y[ti]) / h
-            status = cc.exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out)
-            if status < 0 or status > 1:
-                if kind == cc.IN_PROCESS:
-                    _fail(fail, INPUTS, step, t, sent[0], sent[1], sent[2], sent[3], sent[4], sent[5])
-                else:
-                    _fail(fail, COMPONENT, step, t, status, DO_STEP)
-                if iterative:
-                    _release(kind, H, state, counts)
-                return y
-            counts[7] += 1
+            if not jacobi:
+                for i in range(6):
+                    sent[i] = u[i]
+                if secant:   # BearingLink.secant_ring_speeds
+                    sent[4] = (y_end[tj] - y[tj]) / h
+                    sent[5] = (y_end[ti] - y[ti]) / h
+                if not _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, t, fail,
+                                 counts):
+                    if iterative:
+                        _release(kind, H, state, counts)
+                    return y
             s = 0.0
             for k in range(8):
                 s += out[k]
@@ -328,11 +376,11 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                     _release(kind, H, state, counts)
                 return y
             x[0] = t
-            for i in range(4):
-                x[1 + i] = u[i]
+            for i in range(4):    # the inputs the force belongs to: u_{n+1}, or u_n with Jacobi ordering
+                x[1 + i] = xin[i] if jacobi else u[i]
             for k in range(8):
                 x[5 + k] = out[k]
-            npast = _push(past, npast, x)
+            npast = _push(past, npast, x, history)
             iset[13] = npast
             for i in range(6):
                 xin[i] = u[i]
