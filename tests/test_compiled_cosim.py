@@ -4,10 +4,13 @@ The same RunConfig runs with ``MasterSettings.compiled_loop`` False (``run_maste
 through fmpy: the reference) and True (``compiled_loop.run_steps`` calling the FMU natively, ``fmu_native``).
 Same FMU, same inputs in the same order: every column, the meta (counters, component calls, life outputs read
 from the FMU, energy figures, failure) and the status must be bit-identical. The FMU's states the rollback
-saves are all freed, and the FMU is closed after the run (its handles invalidated).
+saves are all freed (counted at the FMU's boundary: the handle's fmi2GetFMUstate and fmi2FreeFMUstate slots
+pointed at counting ctypes wrappers of the FMU's own functions), and the FMU is closed after the run (its handles
+invalidated).
 """
 from __future__ import annotations
 
+import ctypes
 import functools
 import math
 
@@ -16,7 +19,7 @@ import pytest
 from conftest import built_fmu
 
 from mechanism import run as run_module
-from mechanism.cosim import compiled_driver
+from mechanism.cosim import compiled_driver, fmu_native
 from mechanism.cosim.master import MasterSettings
 from mechanism.run import RunConfig, run
 
@@ -52,11 +55,55 @@ def _compare(config: RunConfig, monkeypatch):
     return ref, new, loop
 
 
+#: fmi2Status f(fmi2Component, fmi2FMUstate*): fmi2GetFMUstate and fmi2FreeFMUstate
+_STATE_CALL = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_void_p))
+
+
+class StateWatch:
+    """The FMU states the compiled loop takes and frees, seen at the FMU's boundary: ``endpoint_handle``'s
+    fmi2GetFMUstate and fmi2FreeFMUstate slots point at ctypes wrappers calling the FMU's own functions."""
+
+    def __init__(self):
+        self.taken, self.freed, self.live, self.errors = 0, 0, set(), []
+        self._keep = []
+
+    def handle(self, original, endpoint):
+        H = original(endpoint)
+        get, free = _STATE_CALL(int(H[fmu_native.GET_STATE])), _STATE_CALL(int(H[fmu_native.FREE_STATE]))
+
+        def watched_get(c, p):
+            status = get(c, p)
+            if p[0] in self.live:
+                self.errors.append(f"state {p[0]:#x} handed out twice")
+            self.live.add(p[0])
+            self.taken += 1
+            return status
+
+        def watched_free(c, p):
+            if p[0] not in self.live:
+                self.errors.append(f"freeing {p[0]} that is not live")
+            self.live.discard(p[0])
+            self.freed += 1
+            return free(c, p)
+
+        wrappers = (_STATE_CALL(watched_get), _STATE_CALL(watched_free))
+        self._keep.append(wrappers)
+        H[fmu_native.GET_STATE], H[fmu_native.FREE_STATE] = (ctypes.cast(w, ctypes.c_void_p).value for w in wrappers)
+        return H
+
+
+@pytest.fixture
+def states(monkeypatch) -> StateWatch:
+    watch = StateWatch()
+    monkeypatch.setattr(fmu_native, "endpoint_handle", functools.partial(watch.handle, fmu_native.endpoint_handle))
+    return watch
+
+
 def _cosim(fmu, **kw) -> RunConfig:
     return RunConfig(mode="cosim", fmu=str(fmu), progress=False, **kw)
 
 
-def test_default_run_through_the_fmu(ball_bearing_fmu, monkeypatch):
+def test_default_run_through_the_fmu(ball_bearing_fmu, states, monkeypatch):
     """1200 rpm, 8 balls, C = 50 N s/m, 0.1 rev, the energy account: samples (the FMU's ball loads, cage angle,
     loaded balls), counters, component calls, life outputs and energy meta bit-identical; every state freed."""
     ref, _, loop = _compare(_cosim(ball_bearing_fmu, rpm=1200, revs=0.1,
@@ -67,6 +114,7 @@ def test_default_run_through_the_fmu(ball_bearing_fmu, monkeypatch):
     assert meta["life_outputs"]["equivalent_load_inner"] > 0 and "energy_residual_coupling_J" in meta
     assert ref.has("ball_load_8") and np.nanmax(ref["max_ball_load"]) > 0
     assert loop.states == (500, 500)                              # one FMU state per iterated step, each freed
+    assert (states.taken, states.freed, states.live, states.errors) == (500, 500, set(), [])
 
 
 def test_twenty_balls_every_third_step(ball_bearing_fmu, monkeypatch):
@@ -93,7 +141,7 @@ def test_force_held_schemes(ball_bearing_fmu, scheme, monkeypatch):
 
 
 @pytest.mark.parametrize("settings, step", [({"eccentricity_limit": 1.5e-5}, 1e-5), ({}, 4e-4)])
-def test_failure_is_reported_alike(ball_bearing_fmu, settings, step, monkeypatch):
+def test_failure_is_reported_alike(ball_bearing_fmu, settings, step, states, monkeypatch):
     """The FMU refuses |e| beyond its limit: the same step, time, cause (the FMU's logged message), the rows
     so far kept, the saved state of the failing step freed."""
     ref, new, loop = _compare(_cosim(ball_bearing_fmu, rpm=1200, revs=0.1, step=step, settings=settings),
@@ -103,14 +151,16 @@ def test_failure_is_reported_alike(ball_bearing_fmu, settings, step, monkeypatch
     assert "BallBearing.fmu: doStep at t = " in failure["cause"] and "eccentricity_limit" in failure["cause"]
     assert failure["cause"].startswith("ExchangeError: ")
     assert loop.states[0] == loop.states[1] == failure["step"]
+    assert (states.taken, states.freed, states.live, states.errors) == (failure["step"],) * 2 + (set(), [])
 
 
-def test_python_step_inside_the_fmu(ball_bearing_fmu, monkeypatch):
+def test_python_step_inside_the_fmu(ball_bearing_fmu, states, monkeypatch):
     """BEARING_FMU_C_STEP=0 (pythonfmu's Python step, its own FMU states): still bit-identical, states freed."""
     monkeypatch.setenv("BEARING_FMU_C_STEP", "0")
     _, _, loop = _compare(_cosim(ball_bearing_fmu, rpm=1200, revs=0.03,
                                  settings={"damping_model": 1, "damping_coefficient": 50}), monkeypatch)
     assert loop.states == (150, 150)
+    assert (states.taken, states.freed, states.live, states.errors) == (150, 150, set(), [])
 
 
 def test_journal_clearance_fmu(journal_clearance_fmu, monkeypatch):
