@@ -4,7 +4,7 @@ the master's objects into arrays, running chunks of steps, and leaving the objec
 ``run_master`` uses it when ``MasterSettings.compiled_loop`` is set, the kernels are on, the observer's probes
 are compiled, the component is an ``InProcessEndpoint`` with the compiled law or an initialised FMI 2.0
 ``FmuEndpoint`` (called natively, ``fmu_native``) and the scheme is one of ``SCHEMES``; otherwise (an FMI 3.0
-FMU, another scheme) the Python loop (the reference) runs.
+FMU, the law not compiled, the kernels off) the Python loop (the reference) runs.
 """
 from __future__ import annotations
 
@@ -139,8 +139,8 @@ class CompiledLoop:
                          loop._u, loop._dy, loop._lam, self.p1, self.acc, self.stages, loop._probes,
                          loop._probe_scale, loop._react, rec.data, self.cols, self.P, self.cs, self.H,
                          self.refs.inputs, self.refs.coupling, self.refs.real_samples, self.refs.int_samples,
-                         self.refs.bool_samples, self.PC, self.PE, self.past, self.xin, self.xf, self.integrals, self.counts, self.fset, self.iset,
-                         self.sent, self.fail)
+                         self.refs.bool_samples, self.PC, self.PE, self.past, self.xin, self.xf, self.integrals,
+                         self.counts, self.fset, self.iset, self.sent, self.fail)
         code = int(self.fail[0])
         if code == cl.OK:
             self.steps_done, self.t = last, last * self.h

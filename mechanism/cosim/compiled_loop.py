@@ -2,9 +2,10 @@
 
 A second implementation of what ``master.run_master`` + ``CouplingLoop.communicate`` do per step for the
 interface-Jacobian schemes ``jacobian``, ``jacobian-drift``, ``jacobian-secant`` and ``jacobian-implicit`` and the
-force-held schemes ``zoh``, ``extrap1``, ``extrap2`` and ``zoh-jacobi`` (``mechanism.cosim.coupling``) with the in-process component (``component_kernel.law_exchange``) or an FMI 2.0
-FMU called natively (``fmu_native``; ``component_call`` picks by ``kind``), held against that Python loop (the
-reference) by tests/test_compiled_loop.py and tests/test_compiled_cosim.py, with the same order of operations:
+force-held schemes ``zoh``, ``extrap1``, ``extrap2`` and ``zoh-jacobi`` (``mechanism.cosim.coupling``), with the
+in-process component (``component_kernel.law_exchange``) or an FMI 2.0 FMU called natively (``fmu_native``;
+``component_call`` picks by ``kind``), held against that Python loop (the reference) by
+tests/test_compiled_loop.py and tests/test_compiled_cosim.py, with the same order of operations:
 
 * the scheme's force model (``InterfaceJacobianDrift.begin_step`` / ``InterfaceJacobianImplicit.begin_step``,
   ``ZeroOrderHold``, ``LinearExtrapolation``, ``QuadraticExtrapolation``: 17 coefficients of ``ForceModel``), the
@@ -14,8 +15,8 @@ reference) by tests/test_compiled_loop.py and tests/test_compiled_cosim.py, with
   speeds (``BearingLink.secant_ring_speeds``), the exchange, the push of the new ``Exchanged``;
 * the iteration of ``jacobian-implicit``: rollback (the component's state saved once per step and restored
   per pass: a copy of ``cs``, or fmi2Get/SetFMUstate, freed at the end of the step and on every failure; the
-  exchange history and the last inputs and force copied), the convergence test (``converged``), the contact-onset jumps
-  (``onset_jumps``), the iterate-where-needed prediction (``next_pass_negligible``), ``max_iterations``;
+  exchange history and the last inputs and force copied), the convergence test (``converged``), the contact-onset
+  jumps (``onset_jumps``), the iterate-where-needed prediction (``next_pass_negligible``), ``max_iterations``;
 * the accepted pass's energy integrals (``energy_kernel.stage_integrals``), the end-of-step evaluation
   (``kernels.finish``: the sample and the next step's first RK4 stage), and the sample row: the probes,
   the component's samples (cage angle, loaded balls, max ball load, ball loads), the energy account's
