@@ -1,11 +1,13 @@
-"""Wall time of an in-process run with the compiled communication step against the Python loop (issue 11).
+"""Wall time of a run with the compiled communication step against the Python loop (issue 11).
 
-Runs ``mechanism.run.run`` for the same RunConfig with ``MasterSettings.compiled_loop`` True and False,
+Runs ``mechanism.run.run`` (``--mode inprocess``, the default, or ``cosim``: BallBearing.fmu, called natively by
+the compiled loop and through fmpy by the Python loop) for the same RunConfig with ``MasterSettings.compiled_loop`` True and False,
 interleaved, ``--repeat`` times each, after one warm-up run each (kernels compiled/loaded), in one process, and
 prints the medians, µs per communication step and their ratio; with ``--cold`` first the wall time of one run in
 a fresh numba cache (a subprocess with NUMBA_CACHE_DIR in a new temporary folder: the compile).
 
-    python benchmarks/compiled_loop.py [--revs 2] [--rpm 1200] [--step 1e-5] [--repeat 3] [--cold]
+    python benchmarks/compiled_loop.py [--mode inprocess|cosim] [--revs 2] [--rpm 1200] [--step 1e-5] [--repeat 3]
+                                       [--cold]
 """
 from __future__ import annotations
 
@@ -39,6 +41,7 @@ def timed(config: RunConfig, compiled: bool) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--mode", choices=("inprocess", "cosim"), default="inprocess")
     ap.add_argument("--revs", type=float, default=2.0)
     ap.add_argument("--rpm", type=float, default=1200.0)
     ap.add_argument("--step", type=float, default=1e-5)
@@ -46,7 +49,7 @@ def main() -> None:
     ap.add_argument("--cold", action="store_true", help="also time one run in a fresh numba cache")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
-    config = RunConfig(mode="inprocess", rpm=args.rpm, revs=args.revs, step=args.step, progress=False,
+    config = RunConfig(mode=args.mode, rpm=args.rpm, revs=args.revs, step=args.step, progress=False,
                        settings={"damping_model": 1, "damping_coefficient": 50})
     if args.child:       # the cold run, in a fresh cache (set by the parent)
         print(f"{timed(config, True):.2f}")
@@ -55,8 +58,8 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as cache:
             env = dict(os.environ, NUMBA_CACHE_DIR=cache)
             start = time.perf_counter()
-            out = subprocess.run([sys.executable, __file__, "--child", "--revs", str(args.revs), "--rpm",
-                                  str(args.rpm), "--step", str(args.step)], env=env, capture_output=True,
+            out = subprocess.run([sys.executable, __file__, "--child", "--mode", args.mode, "--revs", str(args.revs),
+                                  "--rpm", str(args.rpm), "--step", str(args.step)], env=env, capture_output=True,
                                  text=True, check=True).stdout.strip()
             total = time.perf_counter() - start
         print(f"cold (fresh numba cache): the run {out} s, the process {total:.2f} s")
@@ -69,7 +72,7 @@ def main() -> None:
             times[flag].append(timed(config, flag))
     on, off = statistics.median(times[True]), statistics.median(times[False])
     print(f"{args.revs:g} revolutions at {args.rpm:g} rpm, step {args.step:g} s ({steps} steps), "
-          f"jacobian-implicit, in-process, medians of {args.repeat}")
+          f"jacobian-implicit, {args.mode}, medians of {args.repeat}")
     print(f"compiled loop   {on:7.3f} s  {1e6 * on / steps:7.1f} µs/step")
     print(f"Python loop     {off:7.3f} s  {1e6 * off / steps:7.1f} µs/step")
     print(f"ratio           {off / on:7.1f} x")

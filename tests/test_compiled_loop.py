@@ -106,8 +106,10 @@ def test_large_step_not_converged(monkeypatch):
     assert ref.meta["iteration_not_converged"] > 0
 
 
-@pytest.mark.parametrize("scheme", ["jacobian", "jacobian-drift", "jacobian-secant"])
-def test_explicit_interface_jacobian_schemes(scheme, monkeypatch):
+@pytest.mark.parametrize("scheme", ["jacobian", "jacobian-drift", "jacobian-secant", "zoh", "extrap1", "extrap2",
+                                    "zoh-jacobi"])
+def test_explicit_schemes(scheme, monkeypatch):
+    """The one-pass schemes: interface-Jacobian, and the force held or extrapolated (Gauss-Seidel and Jacobi)."""
     ref, _ = _compare(RunConfig(mode="inprocess", rpm=1200, revs=0.02, scheme=scheme, record_every=2,
                                 progress=False), monkeypatch)
     assert "iteration_passes_mean" not in ref.meta
@@ -123,9 +125,9 @@ def test_failure_is_reported_alike(settings, step, monkeypatch):
 
 
 def test_other_paths_run_the_python_loop(monkeypatch):
-    """A scheme the compiled loop does not implement, or the kernels off, fall back to the Python loop."""
-    cfg = RunConfig(mode="inprocess", rpm=1200, revs=0.01, scheme="extrap1", progress=False)
-    result, chunks = _run(cfg, True, monkeypatch)
+    """The law not compiled, or the kernels off, fall back to the Python loop."""
+    monkeypatch.setattr(run_module, "InProcessEndpoint", functools.partial(InProcessEndpoint, compiled=False))
+    result, chunks = _run(RunConfig(mode="inprocess", rpm=1200, revs=0.01, progress=False), True, monkeypatch)
     assert result.ok and chunks == 0
     monkeypatch.setattr(compiled_driver.CompiledLoop, "__init__", None)    # would fail if used
     settings = functools.partial(MasterSettings, kernels=False)

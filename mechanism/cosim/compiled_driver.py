@@ -2,31 +2,56 @@
 the master's objects into arrays, running chunks of steps, and leaving the objects as the Python loop would.
 
 ``run_master`` uses it when ``MasterSettings.compiled_loop`` is set, the kernels are on, the observer's probes
-are compiled, the component is an ``InProcessEndpoint`` with the compiled law and the scheme is one of
-``SCHEMES``; otherwise the Python loop (the reference) runs.
+are compiled, the component is an ``InProcessEndpoint`` with the compiled law or an initialised FMI 2.0
+``FmuEndpoint`` (called natively, ``fmu_native``) and the scheme is one of ``SCHEMES``; otherwise (an FMI 3.0
+FMU, the law not compiled, the kernels off) the Python loop (the reference) runs.
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 from fmu_bearing.ball_bearing import BearingInputError
 from mechanism.cosim import compiled_loop as cl
+from mechanism.cosim import component_call as cc
 from mechanism.cosim import component_kernel as ck
+from mechanism.cosim import fmu_native
 from mechanism.cosim.coupling import Exchanged
+from mechanism.cosim.endpoints import ExchangeError
 from mechanism.cosim.law_kernel import pack_bearing
 
-#: the schemes the compiled loop implements (their force models: ``compiled_loop.drift_model``, ``trial_model``)
-SCHEMES = ("jacobian", "jacobian-drift", "jacobian-secant", "jacobian-implicit")
+#: the schemes the compiled loop implements (their force models: ``compiled_loop.drift_model``, ``trial_model``,
+#: ``hold_model``)
+SCHEMES = ("jacobian", "jacobian-drift", "jacobian-secant", "jacobian-implicit", "zoh", "extrap1", "extrap2",
+           "zoh-jacobi")
+
+
+#: what the compiled loop calls of the FMU's (a handle without one of them: the Python loop runs)
+_FMU_CALLS = (fmu_native.SET_REAL, fmu_native.DO_STEP, fmu_native.GET_REAL, fmu_native.GET_INTEGER,
+              fmu_native.GET_BOOLEAN, fmu_native.GET_STATE, fmu_native.SET_STATE, fmu_native.FREE_STATE)
+
+
+def component_kind(endpoint) -> int | None:
+    """``component_call``'s kind for ``endpoint``, or None if the compiled loop cannot call it: an
+    ``InProcessEndpoint`` with the compiled law, or an initialised FMI 2.0 ``FmuEndpoint`` whose binary has
+    every call the loop makes and at most 8 coupling outputs."""
+    from mechanism.cosim.endpoints import FmuEndpoint, InProcessEndpoint
+    if type(endpoint) is InProcessEndpoint:
+        return cc.IN_PROCESS if getattr(endpoint, "_law", None) is not None else None
+    if type(endpoint) is FmuEndpoint and endpoint._instantiated and len(endpoint.coupling_names) <= cc.N_COUPLING:
+        functions = endpoint.fmu._functions
+        if all(functions.get(fmu_native.FUNCTIONS[slot - 1]) is not None for slot in _FMU_CALLS):
+            return cc.FMU
+    return None
 
 
 def eligible(loop) -> bool:
     """True if ``loop`` (a started ``CouplingLoop``) can run compiled (see the module docstring)."""
-    from mechanism.cosim.endpoints import InProcessEndpoint
-    endpoint, scheme = loop.endpoint, loop.scheme
+    scheme = loop.scheme
     return bool(getattr(loop.settings, "compiled_loop", False) and loop.kernels and loop._observe_in_kernel
-                and loop.link is not None and type(endpoint) is InProcessEndpoint
-                and getattr(endpoint, "_law", None) is not None
-                and scheme is not None and scheme.name in SCHEMES and scheme.ordering == "gauss-seidel"
+                and loop.link is not None and component_kind(loop.endpoint) is not None
+                and scheme is not None and scheme.name in SCHEMES
                 and (loop.energy is None or loop.integrals is not None))
 
 
@@ -47,8 +72,15 @@ class CompiledLoop:
         scols = list(range(scols.start, scols.stop)) if isinstance(scols, slice) else [int(c) for c in scols]
         self.cols = np.array([index["omega_inner"], index["omega_outer"], index["kinetic_energy"], *ecols, *scols],
                              np.int64)
-        self.P = endpoint._law
-        self.cs = ck.pack_state(endpoint)
+        self.kind = component_kind(endpoint)
+        if self.kind == cc.IN_PROCESS:
+            self.P, self.cs = endpoint._law, ck.pack_state(endpoint)
+            self.H = np.zeros(fmu_native.SLOTS, np.int64)
+            none = np.zeros(0, np.uint32)
+            self.refs = fmu_native.References(none, none, none, none, none)
+        else:
+            self.P, self.cs = np.zeros(0), np.zeros(0)
+            self.H, self.refs = fmu_native.endpoint_handle(endpoint), fmu_native.endpoint_references(endpoint)
         law = loop.contact_law
         self.PC = pack_bearing(law) if law is not None else np.zeros(0)
         fset = np.zeros(cl.N_FSET)
@@ -63,15 +95,19 @@ class CompiledLoop:
             fset[8:13] = (acct._start, offset, acct.bearing.params.cage_angle_start, *acct._angles0)
         else:
             self.PE = self.P
-        fset[13] = endpoint.bearing.eccentricity_limit
+        fset[13] = endpoint.bearing.eccentricity_limit if self.kind == cc.IN_PROCESS else math.inf
         self.fset = fset
         iset = np.zeros(cl.N_ISET, np.int64)
         iset[0:10] = (settings.max_substeps, max(2, settings.max_iterations), settings.iterate_where_needed,
                       scheme.iterative, self.secant, self.energy is not None, link._theta_j, link._theta_i,
                       law is not None, loop.system.m > 0)
         iset[10] = loop._end[0] is y and loop._end[1] == 0.0
+        iset[11] = self.kind
         iset[12] = scheme.history == 2
-        self.past = np.zeros((2, 13))
+        iset[14] = cl.MODELS.get(scheme.name.replace("-jacobi", ""), 0)
+        iset[15] = scheme.ordering == "jacobi"
+        iset[16] = scheme.history
+        self.past = np.zeros((3, 13))
         for k, x in enumerate(scheme.past):
             self.past[k] = (x.t, x.e_x, x.e_y, x.v_x, x.v_y, x.F_x, x.F_y, x.k_xx, x.k_xy, x.k_yy, x.c_xx,
                             x.c_xy, x.c_yy)
@@ -81,7 +117,7 @@ class CompiledLoop:
         self.xf = np.array(loop.force, np.float64)
         it = loop.iterations
         self.counts = np.array([loop.substeps_max, loop.substeps_total, it["steps"], it["passes"], it["max_passes"],
-                                it["not_converged"], it["predicted"], endpoint.calls, rec.rows], np.int64)
+                                it["not_converged"], it["predicted"], endpoint.calls, rec.rows, 0, 0], np.int64)
         self.integrals = loop.integrals if loop.integrals is not None else np.zeros(5)
         self.acc = loop._acc if self.energy is not None else np.zeros(3)
         self.p1 = loop._p1 if self.energy is not None else np.zeros(3)
@@ -101,9 +137,10 @@ class CompiledLoop:
             rec.data = np.vstack([rec.data, np.full_like(rec.data, np.nan)])
         y = cl.run_steps(y, first, last, self.h, self.every, loop._I, loop._R, loop._L, loop._LR, loop._W,
                          loop._u, loop._dy, loop._lam, self.p1, self.acc, self.stages, loop._probes,
-                         loop._probe_scale, loop._react, rec.data, self.cols, self.P, self.cs, self.PC, self.PE,
-                         self.past, self.xin, self.xf, self.integrals, self.counts, self.fset, self.iset,
-                         self.sent, self.fail)
+                         loop._probe_scale, loop._react, rec.data, self.cols, self.P, self.cs, self.H,
+                         self.refs.inputs, self.refs.coupling, self.refs.real_samples, self.refs.int_samples,
+                         self.refs.bool_samples, self.PC, self.PE, self.past, self.xin, self.xf, self.integrals,
+                         self.counts, self.fset, self.iset, self.sent, self.fail)
         code = int(self.fail[0])
         if code == cl.OK:
             self.steps_done, self.t = last, last * self.h
@@ -126,6 +163,15 @@ class CompiledLoop:
                     f"{self.loop.settings.max_constraint_violation:g} (the integration diverged)")
         if code == cl.FORCE:
             return f"the bearing returned a non-finite force {(float(f[3]), float(f[4]))}"
+        if code == cl.COMPONENT:     # the FMU's refusal, as FmuEndpoint words it (with its logged messages)
+            what = {cl.DO_STEP: f"doStep at t = {(int(f[1]) - 1) * self.h:.9g} s", cl.GET_STATE: "getFMUState",
+                    cl.SET_STATE: "setFMUState", cl.FREE_STATE: "freeFMUState",
+                    cl.SAMPLE: "sampling the outputs"}[int(f[4])]
+            try:
+                fmu_native.check(int(f[3]), what, self.loop.endpoint)
+            except ExchangeError as err:
+                return f"ExchangeError: {err}"
+            return f"ExchangeError: {what} failed"
         sent = [float(v) for v in f[3:9]]
         try:
             self.loop.endpoint.bearing.check_inputs(*sent)
@@ -141,7 +187,11 @@ class CompiledLoop:
         loop.iterations.update(steps=int(c[2]), passes=int(c[3]), max_passes=int(c[4]), not_converged=int(c[5]),
                                predicted=int(c[6]))
         endpoint.calls = int(c[7])
-        ck.unpack_state(endpoint, self.cs)
+        self.states = (int(c[9]), int(c[10]))
+        if self.kind == cc.IN_PROCESS:
+            ck.unpack_state(endpoint, self.cs)
+        else:
+            endpoint._sampled = False       # its buffered real samples are not the FMU's outputs now
         loop.inputs = tuple(self.xin.tolist())
         loop.force = tuple(self.xf.tolist())
         loop._cv = float(self.fset[4])

@@ -1,23 +1,29 @@
 """The whole fixed-step communication step compiled (numba): a chunk of steps of ``run_master`` in one call.
 
 A second implementation of what ``master.run_master`` + ``CouplingLoop.communicate`` do per step for the
-interface-Jacobian schemes ``jacobian-drift``, ``jacobian-secant`` and ``jacobian-implicit``
-(``mechanism.cosim.coupling``) with the in-process component (``component_kernel.law_exchange``), held against
-that Python loop (the reference) by tests/test_compiled_loop.py, with the same order of operations:
+interface-Jacobian schemes ``jacobian``, ``jacobian-drift``, ``jacobian-secant`` and ``jacobian-implicit`` and the
+force-held schemes ``zoh``, ``extrap1``, ``extrap2`` and ``zoh-jacobi`` (``mechanism.cosim.coupling``), with the
+in-process component (``component_kernel.law_exchange``) or an FMI 2.0 FMU called natively (``fmu_native``;
+``component_call`` picks by ``kind``), held against that Python loop (the reference) by
+tests/test_compiled_loop.py and tests/test_compiled_cosim.py, with the same order of operations:
 
 * the scheme's force model (``InterfaceJacobianDrift.begin_step`` / ``InterfaceJacobianImplicit.begin_step``,
-  17 coefficients of ``ForceModel``), the RK4 substeps of ``master.substeps``;
+  ``ZeroOrderHold``, ``LinearExtrapolation``, ``QuadraticExtrapolation``: 17 coefficients of ``ForceModel``), the
+  RK4 substeps of ``master.substeps`` (one for the force-held schemes); Jacobi ordering (``zoh-jacobi``): the
+  component steps first, with the last inputs;
 * a pass: ``kernels.advance`` (with the energy account's stages), the divergence checks, the secant ring
   speeds (``BearingLink.secant_ring_speeds``), the exchange, the push of the new ``Exchanged``;
-* the iteration of ``jacobian-implicit``: rollback (copies of the component state ``cs``, the exchange
-  history and the last inputs and force), the convergence test (``converged``), the contact-onset jumps
-  (``onset_jumps``), the iterate-where-needed prediction (``next_pass_negligible``), ``max_iterations``;
+* the iteration of ``jacobian-implicit``: rollback (the component's state saved once per step and restored
+  per pass: a copy of ``cs``, or fmi2Get/SetFMUstate, freed at the end of the step and on every failure; the
+  exchange history and the last inputs and force copied), the convergence test (``converged``), the contact-onset
+  jumps (``onset_jumps``), the iterate-where-needed prediction (``next_pass_negligible``), ``max_iterations``;
 * the accepted pass's energy integrals (``energy_kernel.stage_integrals``), the end-of-step evaluation
   (``kernels.finish``: the sample and the next step's first RK4 stage), and the sample row: the probes,
   the component's samples (cage angle, loaded balls, max ball load, ball loads), the energy account's
   columns (``EnergyAccount.update`` with the integrals), the ring speeds sent.
 
-The exchange history is an array ``past`` (2 x 13, the fields of ``Exchanged`` in order) with its count.
+The exchange history is an array ``past`` (3 x 13, the fields of ``Exchanged`` in order) with its count (at most
+the scheme's ``history``).
 The driver (``mechanism.cosim.compiled_driver``) packs the Python objects into arrays and back.
 """
 from __future__ import annotations
@@ -28,24 +34,30 @@ import numpy as np
 from numba import njit
 
 from fmu_bearing.parameters import DAMPING_CONSTANT
-from mechanism.cosim.component_kernel import CS_CAGE, CS_LOADS, CS_OUT, law_exchange
+from mechanism.cosim import component_call as cc
 from mechanism.cosim.energy_kernel import stage_integrals
 from mechanism.cosim.law_kernel import elastic_energy
 from mechanism.multibody.kernels import advance, finish, force_of_model
 
 #: failure codes of ``run_steps`` (fail[0]); fail[1] = step, fail[2] = t, fail[3:] the values the message names
-OK, NOT_FINITE, CONSTRAINT, INPUTS, FORCE = 0, 1, 2, 3, 4
+#: INPUTS: the in-process law rejected the inputs (fail[3:9]); COMPONENT: the FMU refused a call (fail[3] its
+#: status, fail[4] the call: one of the CALLS)
+OK, NOT_FINITE, CONSTRAINT, INPUTS, FORCE, COMPONENT = 0, 1, 2, 3, 4, 5
+#: the FMU calls a COMPONENT failure names (fail[4])
+DO_STEP, GET_STATE, SET_STATE, FREE_STATE, SAMPLE = 0, 1, 2, 3, 4
 #: counters (``counts``): substeps max, substeps total, iterated steps, passes, max passes, not converged,
-#: predicted, component calls, recorded rows
-N_COUNTS = 9
+#: predicted, component calls, recorded rows, component states saved, component states freed
+N_COUNTS = 11
 #: float settings (``fset``): mobility, substep limit, max constraint violation, iteration tol, cv (in/out),
 #: contact law: cage start, journal and housing angle at t = 0; energy: start energy, stage cage offset,
 #: cage start, journal and housing angle at t = 0; eccentricity limit
 N_FSET = 14
 #: int settings (``iset``): max substeps, pass limit, predict, iterative, secant, energy, theta_j, theta_i,
-#: contact law present, constraints (m), end evaluation valid (in/out), (unused), drift history, entries of past
-#: (in/out)
-N_ISET = 14
+#: contact law present, constraints (m), end evaluation valid (in/out), component kind (``component_call``),
+#: drift history, entries of past (in/out), force model (``MODELS``), Jacobi ordering, the scheme's history
+N_ISET = 17
+#: force models (iset[14]): the interface-Jacobian ones (``drift_model``, ``trial_model``), ``hold_model``'s
+MODELS = {"jacobian": 0, "zoh": 1, "extrap1": 2, "extrap2": 3}
 
 
 @njit(cache=True)
@@ -77,7 +89,7 @@ def drift_model(past, npast, drift_history, fm):
     with the previous step's drift d (``InterfaceJacobianDrift.begin_step``) into fm."""
     ax = ay = 0.0
     if drift_history and npast == 2:
-        a, b = past[0], past[1]
+        a, b = past[npast - 2], past[npast - 1]
         px, py = _linear(a, b[1], b[2], b[3], b[4])
         dt = b[0] - a[0]
         ax, ay = (b[5] - px) / dt, (b[6] - py) / dt
@@ -86,6 +98,29 @@ def drift_model(past, npast, drift_history, fm):
     fm[7], fm[8], fm[9], fm[10] = x[1], x[2], x[3], x[4]
     for i in range(6):
         fm[11 + i] = x[7 + i]
+
+
+@njit(cache=True)
+def hold_model(model, past, npast, fm):
+    """The force models of the force-held schemes into fm: ``zoh`` (``ZeroOrderHold``: F_n held), ``extrap1``
+    (``LinearExtrapolation``: F_n + (F_n - F_{n-1}) (tau - t_n) / (t_n - t_{n-1})), ``extrap2``
+    (``QuadraticExtrapolation``: the Newton form through the last three forces), lower order until the history
+    exists (``model``: their ``MODELS`` codes)."""
+    fm[:] = 0.0
+    c = past[npast - 1]
+    fm[0], fm[1], fm[2] = c[0], c[5], c[6]
+    if model == 2 or (model == 3 and npast == 2):
+        if npast >= 2:
+            b = past[npast - 2]
+            dt = c[0] - b[0]
+            fm[3], fm[4] = (c[5] - b[5]) / dt, (c[6] - b[6]) / dt
+    elif model == 3 and npast == 3:
+        a, b = past[0], past[1]
+        cbx, cby = (c[5] - b[5]) / (c[0] - b[0]), (c[6] - b[6]) / (c[0] - b[0])
+        bax, bay = (b[5] - a[5]) / (b[0] - a[0]), (b[6] - a[6]) / (b[0] - a[0])
+        qx, qy = (cbx - bax) / (c[0] - a[0]), (cby - bay) / (c[0] - a[0])
+        w = c[0] - b[0]
+        fm[3], fm[4], fm[5], fm[6] = cbx + qx * w, cby + qy * w, qx, qy
 
 
 @njit(cache=True)
@@ -185,12 +220,13 @@ def k1_valid(fm, t0, xin, xf):
 
 
 @njit(cache=True)
-def _push(past, npast, x):
-    """Append x to the exchange history (2 kept); returns the new count."""
-    if npast == 2:
-        past[0, :] = past[1, :]
-        past[1, :] = x
-        return 2
+def _push(past, npast, x, history):
+    """Append x to the exchange history (``history`` kept: the scheme's deque); returns the new count."""
+    if npast == history:
+        for k in range(history - 1):
+            past[k, :] = past[k + 1, :]
+        past[history - 1, :] = x
+        return history
     past[npast, :] = x
     return npast + 1
 
@@ -202,21 +238,48 @@ def _fail(fail, code, step, t, v0=0.0, v1=0.0, v2=0.0, v3=0.0, v4=0.0, v5=0.0):
 
 
 @njit(cache=True)
+def _release(kind, H, state, counts) -> int:
+    """Free the step's saved component state (``component_call.free``), counted."""
+    status = cc.free(kind, H, state)
+    counts[10] += 1
+    return status
+
+
+@njit(cache=True)
+def _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, t, fail, counts) -> bool:
+    """The component's exchange (``component_call.exchange``), counted; False (``fail`` set) if refused."""
+    status = cc.exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out)
+    if status < 0 or status > 1:
+        if kind == cc.IN_PROCESS:
+            _fail(fail, INPUTS, step, t, sent[0], sent[1], sent[2], sent[3], sent[4], sent[5])
+        else:
+            _fail(fail, COMPONENT, step, t, status, DO_STEP)
+        return False
+    counts[7] += 1
+    return True
+
+
+@njit(cache=True)
 def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, stages, probes, scale, react,
-              data, cols, P, cs, PC, PE, past, xin, xf, integrals, counts, fset, iset, sent, fail):
+              data, cols, P, cs, H, vr_in, vr_out, vr_real, vr_int, vr_bool, PC, PE, past, xin, xf, integrals,
+              counts, fset, iset, sent, fail):
     """Communication steps ``first`` .. ``last`` from the state y at t = (first - 1) h; returns the state
     reached (the last step's end, or the start of the step that failed: ``fail[0]`` != OK then).
 
     ``data``: the sample table (rows appended at counts[8], every ``every``-th step); ``cols``: columns of
     omega_inner, omega_outer, kinetic_energy, the 6 energy columns (-1: no account) and the component's samples.
-    ``P``: the component's law, ``cs`` its state (``component_kernel``); ``PC``: the contact law locating onsets
-    (empty: none); ``PE``: the energy account's law. ``past`` (2 x 13) with iset[13] entries, ``xin`` and
+    The component (``component_call``, kind iset[11]): in-process ``P``, its law, and ``cs``, its state
+    (``component_kernel``); an FMU: the handle ``H`` and the value references of its inputs, coupling outputs and
+    sampled reals, integers and booleans (``fmu_native.endpoint_references``). ``PC``: the contact law locating
+    onsets (empty: none); ``PE``: the energy account's law. ``past`` (3 x 13) with iset[13] entries, ``xin`` and
     ``xf``: the history, last inputs and force of the loop (updated in place). ``sent``: the last inputs sent.
     """
     mobility, sub_limit, max_cv, tol = fset[0], fset[1], fset[2], fset[3]
     max_sub, limit, predict, iterative, secant = iset[0], iset[1], iset[2] != 0, iset[3] != 0, iset[4] != 0
     energy, tj, ti, has_law, constrained = iset[5] != 0, iset[6], iset[7], iset[8] != 0, iset[9] != 0
     drift_history = iset[12] != 0
+    kind = iset[11]
+    model, jacobi, history = iset[14], iset[15] != 0, iset[16]
     nb_c = int(PC[0]) if PC.shape[0] > 0 else 0
     jumps = np.zeros((max(nb_c, 1), 3))
     trial_jumps = np.zeros((max(nb_c, 1), 3))
@@ -225,13 +288,15 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
     start = np.zeros(13)
     prev = np.zeros(13)
     trial = np.zeros(13)
-    snap_past = np.zeros((2, 13))
+    snap_past = np.zeros_like(past)
     snap_xin = np.zeros(6)
     snap_xf = np.zeros(2)
     snap_cs = np.zeros(cs.shape[0])
     no_row = np.zeros(0)
+    out = np.zeros(cc.N_COUPLING)
     npast = iset[13]
     ns = cols.shape[0] - 9
+    samples = np.zeros(ns)
     ecc_limit = fset[13]
     for step in range(first, last + 1):
         t0 = (step - 1) * h
@@ -241,11 +306,16 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
         if has_law:   # energy.kinematic_cage_angle
             cage_start = fset[5] + ((y[tj] - fset[6]) * PC[11] + (y[ti] - fset[7]) * PC[12])
         snap_npast = npast
+        state = 0
         if iterative:
+            status, state = cc.save(kind, cs, snap_cs, H)
+            if status < 0 or status > 1:
+                _fail(fail, COMPONENT, step, t, status, GET_STATE)
+                return y
+            counts[9] += 1
             snap_past[:, :] = past
             snap_xin[:] = xin
             snap_xf[:] = xf
-            snap_cs[:] = cs
         have_prev = False
         have_trial = False
         ntrial = 0
@@ -254,11 +324,19 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
         hs = h
         y_end = y
         for passes in range(1, (limit if iterative else 1) + 1):
-            if have_trial:
+            if jacobi:   # the component steps first, with the last inputs (master.CouplingLoop.advance)
+                for i in range(6):
+                    sent[i] = xin[i]
+                if not _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, t, fail,
+                                 counts):
+                    return y
+            if model != 0:
+                hold_model(model, past, npast, fm)
+            elif have_trial:
                 trial_model(past[npast - 1], trial, trial_jumps, ntrial, fm)
             else:
                 drift_model(past, npast, drift_history, fm)
-            m = substeps(h, past[npast - 1], mobility, sub_limit, max_sub)
+            m = substeps(h, past[npast - 1], mobility, sub_limit, max_sub) if model == 0 else 1
             counts[0] = max(counts[0], m)
             counts[1] += m
             hs = h / m
@@ -269,37 +347,45 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             y_end, drift, finite = advance(y, t0, hs, m, t, fm, dy, k1v, I, R, L, LR, W, u, acc, p1, stages)
             if not finite:
                 _fail(fail, NOT_FINITE, step, t)
+                if iterative:
+                    _release(kind, H, state, counts)
                 return y
             if constrained:
                 fset[4] = drift
                 if drift > max_cv:
                     _fail(fail, CONSTRAINT, step, t, drift)
+                    if iterative:
+                        _release(kind, H, state, counts)
                     return y
-            for i in range(6):
-                sent[i] = u[i]
-            if secant:   # BearingLink.secant_ring_speeds
-                sent[4] = (y_end[tj] - y[tj]) / h
-                sent[5] = (y_end[ti] - y[ti]) / h
-            if law_exchange(P, ecc_limit, cs, h, sent) != 0:
-                _fail(fail, INPUTS, step, t, sent[0], sent[1], sent[2], sent[3], sent[4], sent[5])
-                return y
-            counts[7] += 1
+            if not jacobi:
+                for i in range(6):
+                    sent[i] = u[i]
+                if secant:   # BearingLink.secant_ring_speeds
+                    sent[4] = (y_end[tj] - y[tj]) / h
+                    sent[5] = (y_end[ti] - y[ti]) / h
+                if not _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, t, fail,
+                                 counts):
+                    if iterative:
+                        _release(kind, H, state, counts)
+                    return y
             s = 0.0
             for k in range(8):
-                s += cs[CS_OUT + k]
+                s += out[k]
             if not math.isfinite(s):
-                _fail(fail, FORCE, step, t, cs[CS_OUT], cs[CS_OUT + 1])
+                _fail(fail, FORCE, step, t, out[0], out[1])
+                if iterative:
+                    _release(kind, H, state, counts)
                 return y
             x[0] = t
-            for i in range(4):
-                x[1 + i] = u[i]
+            for i in range(4):    # the inputs the force belongs to: u_{n+1}, or u_n with Jacobi ordering
+                x[1 + i] = xin[i] if jacobi else u[i]
             for k in range(8):
-                x[5 + k] = cs[CS_OUT + k]
-            npast = _push(past, npast, x)
+                x[5 + k] = out[k]
+            npast = _push(past, npast, x, history)
             iset[13] = npast
             for i in range(6):
                 xin[i] = u[i]
-            xf[0], xf[1] = cs[CS_OUT], cs[CS_OUT + 1]
+            xf[0], xf[1] = out[0], out[1]
             if not iterative:
                 break
             end = past[npast - 1]
@@ -324,10 +410,19 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             iset[13] = npast
             xin[:] = snap_xin
             xf[:] = snap_xf
-            cs[:] = snap_cs
+            status = cc.restore(kind, cs, snap_cs, H, state)
+            if status < 0 or status > 1:
+                _fail(fail, COMPONENT, step, t, status, SET_STATE)
+                _release(kind, H, state, counts)
+                return y
             trial_jumps[:nj] = jumps[:nj]
             ntrial = nj
             have_trial = True
+        if iterative:   # CouplingLoop.release
+            status = _release(kind, H, state, counts)
+            if status < 0 or status > 1:
+                _fail(fail, COMPONENT, step, t, status, FREE_STATE)
+                return y
         if energy:   # the accepted pass's integrals (CouplingLoop._integrate_energy)
             d_, wc = stage_integrals(PE, stages, m, hs, fset[9])
             integrals[0] += d_
@@ -346,13 +441,13 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
         iset[10] = 1
         if record:
             counts[8] += 1
-            # the component's samples (InProcessEndpoint.sample): cage angle, loaded balls, max load, ball loads
-            if ns > 0:
-                row[cols[9]] = cs[CS_CAGE]
-                row[cols[10]] = cs[CS_OUT + 8]
-                row[cols[11]] = cs[CS_OUT + 9]
-                for r in range(ns - 3):
-                    row[cols[12 + r]] = cs[CS_LOADS + r]
+            if ns > 0:   # the component's samples (the endpoint's sample / sample_into)
+                status = cc.sample(kind, cs, H, vr_real, vr_int, vr_bool, samples)
+                if status < 0 or status > 1:
+                    _fail(fail, COMPONENT, step, t, status, SAMPLE)
+                    return y
+                for k in range(ns):
+                    row[cols[9 + k]] = samples[k]
             if energy:   # EnergyAccount.update with the integrals
                 kinetic = row[cols[2]]
                 cage = fset[10] + ((y[tj] - fset[11]) * PE[11] + (y[ti] - fset[12]) * PE[12])

@@ -82,7 +82,8 @@ class MasterSettings:
                                          # within iteration_tol (CouplingLoop._next_pass_negligible); False: always
                                          # repeat until two passes agree
     compiled_loop: bool = True           # the whole step compiled (mechanism.cosim.compiled_driver) where it applies
-                                         # (in-process component, interface-Jacobian schemes); False: the Python loop
+                                         # (in-process component or FMI 2.0 FMU, interface-Jacobian schemes); False:
+                                         # the Python loop
 
 
 #: observe(q, qd, qdd, lam, t) -> named observables of the mechanism (slider_x, crank_moment, ...)
@@ -598,7 +599,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
         loop.start(y)
         loop.record(rec, 0.0, y)
         compiled = None
-        if settings.compiled_loop and getattr(endpoint, "kind", None) == "in-process":
+        if settings.compiled_loop and getattr(endpoint, "kind", None) in ("in-process", "fmu"):
             from mechanism.cosim import compiled_driver
             if compiled_driver.eligible(loop):
                 compiled = compiled_driver.CompiledLoop(loop, rec, y, every)
