@@ -100,7 +100,7 @@ def states(monkeypatch) -> StateWatch:
 
 
 def _cosim(fmu, **kw) -> RunConfig:
-    return RunConfig(mode="cosim", fmu=str(fmu), progress=False, **kw)
+    return RunConfig(**{"mode": "cosim", "fmu": str(fmu), "progress": False, "step": 1e-5, **kw})
 
 
 def test_default_run_through_the_fmu(ball_bearing_fmu, states, monkeypatch):
