@@ -15,7 +15,7 @@ the bearing and the double pendulum, each at its initial state with a stiff line
 Only the public kernels are called (``pack``, ``pack_link``, ``workspace_size``, ``rhs``, ``advance``,
 ``prepare``, ``finish``), so the script runs against any checkout. Before/after in one run:
 
-    python benchmarks/rhs.py --before /path/to/the/previous/checkout [--repeat 7] [--rounds 3]
+    python benchmarks/rhs.py --before /path/to/the/previous/checkout [--calls 300] [--repeat 300] [--rounds 3]
 
 runs this script's measurement in child processes with PYTHONPATH set to the previous checkout and to this
 one, alternated ``--rounds`` times, and prints the medians and the ratios before/after. Without
@@ -133,8 +133,8 @@ def _child(checkout: Path, calls: int, repeat: int) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--calls", type=int, default=20_000, help="calls per timed loop")
-    ap.add_argument("--repeat", type=int, default=7, help="timed loops per figure (the best is kept)")
+    ap.add_argument("--calls", type=int, default=300, help="calls per timed loop")
+    ap.add_argument("--repeat", type=int, default=300, help="timed loops per figure (the best is kept)")
     ap.add_argument("--rounds", type=int, default=3, help="before/after alternations (with --before)")
     ap.add_argument("--before", type=Path, help="the previous checkout (PYTHONPATH for the 'before' figures)")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)

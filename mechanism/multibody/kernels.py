@@ -46,24 +46,42 @@ import math
 import numpy as np
 from numba import njit
 
-H_I = 8   # header length of I
+H_I = 24  # header length of I
 H_R = 2   # header length of R
 
 
 # ---------------------------------------------------------------------------------- packing
-def _sparsity(nb: int, n: int, bJ, bI, aJ, aI) -> list[np.ndarray]:
-    """[row pointers, columns, pair pointers, pair columns, column pointers, rows] of Phi_q's structure."""
+def _structure(nb: int, n: int, bJ, bI, aJ, aI) -> list[list[int]]:
+    """The sparsity of eq. (9)'s products, fixed by the model (see the module docstring), as the lists
+    [row pointers, columns, column pointers, rows, S rows, S columns, S pointers, S terms, L row pointers,
+    L row entries, L column pointers, L column entries, common pointers, common entries]."""
     rows = [sorted({3 * b + d for b in (j, i) if b < nb for d in range(3)}) for j, i in zip(bJ, bI)]
     rows += [sorted({3 * b + 2 for b in (j, i) if b < nb}) for j, i in zip(aJ, aI)]
     m = len(rows)
-    rowptr = np.cumsum([0] + [len(r) for r in rows])
-    pairs = [sorted(set(rows[r]) & set(rows[c])) for r in range(m) for c in range(r + 1)]
-    pairptr = np.cumsum([0] + [len(p) for p in pairs])
     cols = [[r for r in range(m) if c in rows[r]] for c in range(n)]
-    colptr = np.cumsum([0] + [len(c) for c in cols])
-    flat = [x for r in rows for x in r]
-    return [rowptr, np.array(flat, np.int64), pairptr, np.array([x for p in pairs for x in p], np.int64), colptr,
-            np.array([x for c in cols for x in c], np.int64)]
+    # S = Phi_q M^-1 Phi_q^T: rows r, c share a column; the symbolic Cholesky of S in the rows' order:
+    # L[i, j] != 0 if S[i, j] != 0 or L[i, k] L[j, k] != 0 for a k < j
+    terms = {(r, c): sorted(set(rows[r]) & set(rows[c])) for r in range(m) for c in range(r)}
+    lower: list[set[int]] = [set() for _ in range(m)]        # lower[i]: the k < i with L[i, k] != 0
+    for j in range(m):
+        for i in range(j + 1, m):
+            if terms[i, j] or lower[i] & lower[j]:
+                lower[i].add(j)
+    # the entries of S that the factorisation reads: L's pattern (fill-in included: S = 0 there) and the diagonal
+    spairs = [(r, c, terms[r, c] if c < r else rows[r]) for r in range(m) for c in range(r + 1)
+              if c == r or c in lower[r]]
+    lrow = [sorted(x) for x in lower]
+    lcol = [[i for i in range(m) if j in lower[i]] for j in range(m)]
+    common = [sorted(lower[i] & lower[j]) for j in range(m) for i in lcol[j]]
+
+    def csr(lists):
+        ptr = [0]
+        for x in lists:
+            ptr.append(ptr[-1] + len(x))
+        return ptr, [v for x in lists for v in x]
+
+    out = [*csr(rows), *csr(cols), [p[0] for p in spairs], [p[1] for p in spairs], *csr([p[2] for p in spairs])]
+    return out + [*csr(lrow), *csr(lcol), *csr(common)]
 
 
 def pack(system) -> tuple[np.ndarray, np.ndarray]:
@@ -71,9 +89,17 @@ def pack(system) -> tuple[np.ndarray, np.ndarray]:
     s = system
     nb = s.n // 3
     K, A, m, n = s._K, len(s._aJ), s.m, s.n
-    sparse = _sparsity(nb, n, s._bJ, s._bI, s._aJ, s._aI)
-    ints = np.concatenate((np.array([nb, n, m, K, A, len(sparse[1]), len(sparse[3]), 0], np.int64), s._bJ, s._bI,
-                           s._bref, s._aJ, s._aI, s._to_model, *sparse)).astype(np.int64)
+    rows = [s._bJ, s._bI, s._bref, s._aJ, s._aI, s._to_model]
+    structure = _structure(nb, n, s._bJ, s._bI, s._aJ, s._aI)
+    header = np.zeros(H_I, np.int64)
+    header[:5] = nb, n, m, K, A
+    header[5] = H_I + 3 * K + 2 * A            # to_model
+    o = header[5] + m
+    for k, part in enumerate(structure):       # header[6:20]: where each list of _structure starts
+        header[6 + k] = o
+        o += len(part)
+    header[20] = len(structure[4])             # entries of S's pattern
+    ints = np.concatenate([header] + [np.asarray(p, np.int64) for p in rows + structure]).astype(np.int64)
     reals = np.concatenate(([2.0 * s.alpha, s.beta * s.beta], s._sJ.real, s._sJ.imag, s._sI.real, s._sI.imag,
                             s._nprime.real, s._nprime.imag, s._ref_is_I, s._c0, s._omega, s._minv,
                             s._gravity_force, s.mass)).astype(np.float64)
@@ -97,7 +123,7 @@ def pack_link(system, joint=None, contact_points: str = "centres") -> tuple[np.n
 def workspace_size(ints: np.ndarray) -> int:
     """Length of the work array W of a model packed as ``ints`` (the layout of ``_layout``)."""
     nb, n, m = int(ints[0]), int(ints[1]), int(ints[2])
-    return m * n + 5 * m + m * m + 2 * n + 2 * (nb + 1) + 10 * n
+    return m * n + 5 * m + m * m + 2 * n + 2 * (nb + 1) + 10 * n + 12
 
 
 @njit(cache=True)
@@ -109,20 +135,6 @@ def _layout(I):
     oQ = oS + m * m
     ocs = oQ + 2 * n
     return ophi, ophi + m, ophi + 2 * m, ophi + 3 * m, ophi + 4 * m, oS, oQ, oQ + n, ocs, ocs + 2 * (nb + 1)
-
-
-@njit(cache=True)
-def _sparse(I):
-    """Offsets in I of the sparsity arrays: (row pointers, columns, pair pointers, pair columns, column
-    pointers, rows) (``_sparsity``), and of to_model."""
-    n, m, K, A, nnz, npair = I[1], I[2], I[3], I[4], I[5], I[6]
-    otm = H_I + 3 * K + 2 * A
-    orp = otm + m
-    orc = orp + m + 1
-    opp = orc + nnz
-    opc = opp + m * (m + 1) // 2 + 1
-    ocp = opc + npair
-    return orp, orc, opp, opc, ocp, ocp + n + 1, otm
 
 
 # ---------------------------------------------------------------------------------- kinematics
@@ -222,36 +234,45 @@ def _kinematics(y, t, I, R, W):
 
 
 @njit(cache=True)
-def _cholesky_solve(W, oS, ob, m):
-    """Solve S x = b in place in b (S = W[oS:oS + m m] row-major, symmetric positive semidefinite, overwritten
-    by its factor; b = W[ob:ob + m]).
+def _cholesky_solve(I, W, oS, ob):
+    """Solve S x = b in place in b (S: the lower triangle of W[oS:oS + m m], row-major, symmetric positive
+    semidefinite, overwritten by its factor L; b = W[ob:ob + m]), visiting only the entries of L's pattern
+    (``_structure``): the operations of the dense Cholesky that involve a non-zero, in its order.
 
     A pivot below 1e-12 of the largest diagonal entry (a redundant constraint) is dropped: that
     unknown is set to 0, which solves a consistent redundant system (a basic, not the minimum-norm,
     solution; the accelerations M^-1 (Q - Phi_q^T lam) are the same). Returns the number of
     dropped pivots."""
+    m = I[2]
+    lrp, lrc, lcp, lcr, cmp, cmk = I[14], I[15], I[16], I[17], I[18], I[19]
     big = 0.0
     for j in range(m):
         big = max(big, abs(W[oS + j * m + j]))
     tol = 1e-12 * big
     dropped = 0
+    q = cmp                                               # the common entries' pointers, column by column
     for j in range(m):
         rj = oS + j * m
         d = W[rj + j]
-        for k in range(j):
+        for p in range(I[lrp + j], I[lrp + j + 1]):
+            k = I[lrc + p]
             d -= W[rj + k] * W[rj + k]
         if not d > tol:
             dropped += 1
-            for i in range(j, m):
-                W[oS + i * m + j] = 0.0
+            W[rj + j] = 0.0
+            for p in range(I[lcp + j], I[lcp + j + 1]):
+                W[oS + I[lcr + p] * m + j] = 0.0
+            q += I[lcp + j + 1] - I[lcp + j]
             continue
         d = math.sqrt(d)
         W[rj + j] = d
-        for i in range(j + 1, m):
-            ri = oS + i * m
+        for p in range(I[lcp + j], I[lcp + j + 1]):
+            ri = oS + I[lcr + p] * m
             s = W[ri + j]
-            for k in range(j):
+            for c in range(I[q], I[q + 1]):
+                k = I[cmk + c]
                 s -= W[ri + k] * W[rj + k]
+            q += 1
             W[ri + j] = s / d
     for i in range(m):
         ri = oS + i * m
@@ -259,7 +280,8 @@ def _cholesky_solve(W, oS, ob, m):
             W[ob + i] = 0.0
             continue
         s = W[ob + i]
-        for k in range(i):
+        for p in range(I[lrp + i], I[lrp + i + 1]):
+            k = I[lrc + p]
             s -= W[ri + k] * W[ob + k]
         W[ob + i] = s / W[ri + i]
     for i in range(m - 1, -1, -1):
@@ -267,7 +289,8 @@ def _cholesky_solve(W, oS, ob, m):
             W[ob + i] = 0.0
             continue
         s = W[ob + i]
-        for k in range(i + 1, m):
+        for p in range(I[lcp + i], I[lcp + i + 1]):
+            k = I[lcr + p]
             s -= W[oS + k * m + i] * W[ob + k]
         W[ob + i] = s / W[oS + i * m + i]
     return dropped
@@ -279,13 +302,12 @@ def _solve(y, I, R, W, dy):
     order) in W. (Phi_q M^-1 Phi_q^T) lam = Phi_q M^-1 Q - gamma*, qdd = M^-1 (Q - Phi_q^T lam)."""
     n, m, K, A = I[1], I[2], I[3], I[4]
     ophi, ogam, orhs, olam, ophit, oS, oQ, otmp, _, _ = _layout(I)
-    orp, orc, opp, opc, ocp, ocr, _ = _sparse(I)
+    orp, orc, ocp, ocr, osr, osc, osp, ost = I[6], I[7], I[8], I[9], I[10], I[11], I[12], I[13]
     om = H_R + 7 * K + 2 * A                               # 1/M in R
     a2, b2 = R[0], R[1]
     for i in range(n):
         W[otmp + i] = R[om + i] * W[oQ + i]
-    pair = opp
-    for r in range(m):
+    for r in range(m):                                     # Phi_q M^-1 Q - gamma*
         s = 0.0
         pd = 0.0
         o = r * n
@@ -294,20 +316,17 @@ def _solve(y, I, R, W, dy):
             s += W[o + c] * W[otmp + c]
             pd += W[o + c] * y[n + c]
         W[orhs + r] = s - W[ogam + r] + a2 * (pd + W[ophit + r]) + b2 * W[ophi + r]
-        for c in range(r + 1):
-            v = 0.0
-            oc = c * n
-            for p in range(I[pair], I[pair + 1]):
-                i = I[opc + p]
-                v += W[o + i] * R[om + i] * W[oc + i]
-            pair += 1
-            W[oS + r * m + c] = v
-            W[oS + c * m + r] = v
-    for r in range(m):
         W[olam + r] = W[orhs + r]
+    for e in range(I[20]):                                 # S = Phi_q M^-1 Phi_q^T, its pattern's lower triangle
+        o, oc = I[osr + e] * n, I[osc + e] * n
+        v = 0.0
+        for p in range(I[osp + e], I[osp + e + 1]):
+            i = I[ost + p]
+            v += W[o + i] * R[om + i] * W[oc + i]
+        W[oS + I[osr + e] * m + I[osc + e]] = v
     if m > 0:
-        _cholesky_solve(W, oS, olam, m)                    # redundant rows dropped (see there)
-    for i in range(n):
+        _cholesky_solve(I, W, oS, olam)                    # redundant rows dropped (see there)
+    for i in range(n):                                     # M^-1 (Q - Phi_q^T lam)
         v = W[otmp + i]
         for p in range(I[ocp + i], I[ocp + i + 1]):
             r = I[ocr + p]
@@ -335,7 +354,7 @@ def accelerations(q, qd, t, Q, I, R, W, qdd):
 def multipliers(I, W, lam_model):
     """Lambda of the last solve, in model order."""
     olam = _layout(I)[3]
-    otm = _sparse(I)[6]
+    otm = I[5]
     for k in range(I[2]):
         lam_model[k] = W[olam + I[otm + k]]
 
@@ -344,7 +363,7 @@ def multipliers(I, W, lam_model):
 def constraints(I, W, phi_model):
     """Phi of the last kinematics evaluation, in model order."""
     ophi = _layout(I)[0]
-    otm = _sparse(I)[6]
+    otm = I[5]
     for k in range(I[2]):
         phi_model[k] = W[ophi + I[otm + k]]
 
@@ -500,58 +519,48 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc
     for the bearing side of the account (``mechanism.cosim.energy``).
     """
     N = y.shape[0]
-    ork = _layout(I)[9]                                   # the stages and the stage state live in W
-    kk = W[ork:ork + N]
-    k2 = W[ork + N:ork + 2 * N]
-    k3 = W[ork + 2 * N:ork + 3 * N]
-    k4 = W[ork + 3 * N:ork + 4 * N]
+    ork = _layout(I)[9]                  # in W: the four stages' dy/dt, the stage state, the stages' powers
     yt = W[ork + 4 * N:ork + 5 * N]
+    opw = ork + 5 * N
     y = y.copy()
     h2 = 0.5 * hs
     account = acc is not None and p1 is not None and stages is not None
     nb = I[0]
-    a1 = b1 = c1 = a2 = b2 = c2 = a3 = b3 = c3 = a4 = b4 = c4 = 0.0
     for sub in range(substeps):
         t = t0 + sub * hs
-        if sub > 0 or not k1_valid:
-            rhs(t, y, fm, I, R, L, LR, W, u, kk)
+        for st in range(4):                                # one rhs call site: inlined once
+            k = W[ork + st * N:ork + (st + 1) * N]
+            if st == 0:
+                ts = t
+                for i in range(N):
+                    yt[i] = y[i]
+            else:
+                cs = h2 if st < 3 else hs                  # y + h/2 k1, y + h/2 k2, y + h k3
+                ts = t + cs
+                o = ork + (st - 1) * N
+                for i in range(N):
+                    yt[i] = y[i] + cs * W[o + i]
+            if st == 0 and sub == 0 and k1_valid:
+                for i in range(N):
+                    k[i] = k1[i]
+                if account:
+                    W[opw], W[opw + 1], W[opw + 2] = p1[0], p1[1], p1[2]
+                    if L[0] == 1:
+                        _rotations(y, I, W)
+                        _link_inputs(y, I, L, LR, W, u)
+            else:
+                rhs(ts, yt, fm, I, R, L, LR, W, u, k)
+                if account:
+                    o = opw + 3 * st
+                    W[o], W[o + 1], W[o + 2] = powers(yt, I, R, W)
             if account:
-                a1, b1, c1 = powers(y, I, R, W)
-        else:
-            for i in range(N):
-                kk[i] = k1[i]
-            if account:
-                a1, b1, c1 = p1[0], p1[1], p1[2]
-                if L[0] == 1:
-                    _rotations(y, I, W)
-                    _link_inputs(y, I, L, LR, W, u)
-        if account:
-            _stage_row(stages, 5 * sub, y, u, nb, L)
-        for i in range(N):
-            yt[i] = y[i] + h2 * kk[i]
-        rhs(t + h2, yt, fm, I, R, L, LR, W, u, k2)
-        if account:
-            a2, b2, c2 = powers(yt, I, R, W)
-            _stage_row(stages, 5 * sub + 1, yt, u, nb, L)
-        for i in range(N):
-            yt[i] = y[i] + h2 * k2[i]
-        rhs(t + h2, yt, fm, I, R, L, LR, W, u, k3)
-        if account:
-            a3, b3, c3 = powers(yt, I, R, W)
-            _stage_row(stages, 5 * sub + 2, yt, u, nb, L)
-        for i in range(N):
-            yt[i] = y[i] + hs * k3[i]
-        rhs(t + hs, yt, fm, I, R, L, LR, W, u, k4)
-        if account:
-            a4, b4, c4 = powers(yt, I, R, W)
-            _stage_row(stages, 5 * sub + 3, yt, u, nb, L)
+                _stage_row(stages, 5 * sub + st, yt, u, nb, L)
         c = hs / 6.0
         for i in range(N):
-            y[i] = y[i] + c * (kk[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
+            y[i] = y[i] + c * (W[ork + i] + 2.0 * (W[ork + N + i] + W[ork + 2 * N + i]) + W[ork + 3 * N + i])
         if account:
-            acc[0] += c * (a1 + 2.0 * (a2 + a3) + a4)
-            acc[1] += c * (b1 + 2.0 * (b2 + b3) + b4)
-            acc[2] += c * (c1 + 2.0 * (c2 + c3) + c4)
+            for j in range(3):
+                acc[j] += c * (W[opw + j] + 2.0 * (W[opw + 3 + j] + W[opw + 6 + j]) + W[opw + 9 + j])
             if L[0] == 1:
                 _rotations(y, I, W)
                 _link_inputs(y, I, L, LR, W, u)
@@ -598,7 +607,7 @@ def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t,
     if p1 is not None:
         p1[0], p1[1], p1[2] = powers(y, I, R, W)
     if row.shape[0] > 0 and L[0] == 0 and react.shape[0] == 4:
-        otm = _sparse(I)[6]
+        otm = I[5]
         fx = fy = 0.0
         for r in range(react[0], react[1]):
             k = I[otm + r]
