@@ -46,7 +46,8 @@ import math
 import numpy as np
 from numba import njit
 
-H_I = 24  # header length of I
+H_I = 8   # header length of I
+H_D = 16  # length of the directory of the sparsity lists in I
 H_R = 2   # header length of R
 
 
@@ -91,15 +92,15 @@ def pack(system) -> tuple[np.ndarray, np.ndarray]:
     K, A, m, n = s._K, len(s._aJ), s.m, s.n
     rows = [s._bJ, s._bI, s._bref, s._aJ, s._aI, s._to_model]
     structure = _structure(nb, n, s._bJ, s._bI, s._aJ, s._aI)
-    header = np.zeros(H_I, np.int64)
-    header[:5] = nb, n, m, K, A
-    header[5] = H_I + 3 * K + 2 * A            # to_model
-    o = header[5] + m
-    for k, part in enumerate(structure):       # header[6:20]: where each list of _structure starts
-        header[6 + k] = o
+    header = np.array([nb, n, m, K, A, H_I + 3 * K + 2 * A + m, 0, 0], np.int64)
+    directory = np.zeros(H_D, np.int64)       # after to_model: where each list of _structure starts
+    o = header[5] + H_D
+    for k, part in enumerate(structure):
+        directory[k] = o
         o += len(part)
-    header[20] = len(structure[4])             # entries of S's pattern
-    ints = np.concatenate([header] + [np.asarray(p, np.int64) for p in rows + structure]).astype(np.int64)
+    directory[14] = len(structure[4])          # entries of S's pattern
+    ints = np.concatenate([header] + [np.asarray(p, np.int64) for p in rows] + [directory]
+                          + [np.asarray(p, np.int64) for p in structure]).astype(np.int64)
     reals = np.concatenate(([2.0 * s.alpha, s.beta * s.beta], s._sJ.real, s._sJ.imag, s._sI.real, s._sI.imag,
                             s._nprime.real, s._nprime.imag, s._ref_is_I, s._c0, s._omega, s._minv,
                             s._gravity_force, s.mass)).astype(np.float64)
@@ -244,7 +245,8 @@ def _cholesky_solve(I, W, oS, ob):
     solution; the accelerations M^-1 (Q - Phi_q^T lam) are the same). Returns the number of
     dropped pivots."""
     m = I[2]
-    lrp, lrc, lcp, lcr, cmp, cmk = I[14], I[15], I[16], I[17], I[18], I[19]
+    d = I[5]                                              # the directory (``pack``)
+    lrp, lrc, lcp, lcr, cmp, cmk = I[d + 8], I[d + 9], I[d + 10], I[d + 11], I[d + 12], I[d + 13]
     big = 0.0
     for j in range(m):
         big = max(big, abs(W[oS + j * m + j]))
@@ -302,7 +304,9 @@ def _solve(y, I, R, W, dy):
     order) in W. (Phi_q M^-1 Phi_q^T) lam = Phi_q M^-1 Q - gamma*, qdd = M^-1 (Q - Phi_q^T lam)."""
     n, m, K, A = I[1], I[2], I[3], I[4]
     ophi, ogam, orhs, olam, ophit, oS, oQ, otmp, _, _ = _layout(I)
-    orp, orc, ocp, ocr, osr, osc, osp, ost = I[6], I[7], I[8], I[9], I[10], I[11], I[12], I[13]
+    d = I[5]                                               # the directory (``pack``)
+    orp, orc, ocp, ocr = I[d], I[d + 1], I[d + 2], I[d + 3]
+    osr, osc, osp, ost = I[d + 4], I[d + 5], I[d + 6], I[d + 7]
     om = H_R + 7 * K + 2 * A                               # 1/M in R
     a2, b2 = R[0], R[1]
     for i in range(n):
@@ -317,7 +321,7 @@ def _solve(y, I, R, W, dy):
             pd += W[o + c] * y[n + c]
         W[orhs + r] = s - W[ogam + r] + a2 * (pd + W[ophit + r]) + b2 * W[ophi + r]
         W[olam + r] = W[orhs + r]
-    for e in range(I[20]):                                 # S = Phi_q M^-1 Phi_q^T, its pattern's lower triangle
+    for e in range(I[d + 14]):                                 # S = Phi_q M^-1 Phi_q^T, its pattern's lower triangle
         o, oc = I[osr + e] * n, I[osc + e] * n
         v = 0.0
         for p in range(I[osp + e], I[osp + e + 1]):
@@ -354,7 +358,7 @@ def accelerations(q, qd, t, Q, I, R, W, qdd):
 def multipliers(I, W, lam_model):
     """Lambda of the last solve, in model order."""
     olam = _layout(I)[3]
-    otm = I[5]
+    otm = H_I + 3 * I[3] + 2 * I[4]
     for k in range(I[2]):
         lam_model[k] = W[olam + I[otm + k]]
 
@@ -363,7 +367,7 @@ def multipliers(I, W, lam_model):
 def constraints(I, W, phi_model):
     """Phi of the last kinematics evaluation, in model order."""
     ophi = _layout(I)[0]
-    otm = I[5]
+    otm = H_I + 3 * I[3] + 2 * I[4]
     for k in range(I[2]):
         phi_model[k] = W[ophi + I[otm + k]]
 
@@ -607,7 +611,7 @@ def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t,
     if p1 is not None:
         p1[0], p1[1], p1[2] = powers(y, I, R, W)
     if row.shape[0] > 0 and L[0] == 0 and react.shape[0] == 4:
-        otm = I[5]
+        otm = H_I + 3 * I[3] + 2 * I[4]
         fx = fy = 0.0
         for r in range(react[0], react[1]):
             k = I[otm + r]
