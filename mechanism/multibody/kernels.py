@@ -5,11 +5,14 @@ tests/test_kernels.py (1e-12 in accelerations, 1e-9 over a 0.2-revolution trajec
 The model reaches the kernels as data: ``pack(system)`` flattens what ``System`` precomputed
 from a :class:`~mechanism.multibody.model.Model` into two arrays,
 
-* ``I`` (int64): header ``[nb, n, m, K, A, nnz, npair, 0]``, then bJ, bI, bref (K point rows each),
-  aJ, aI (A angle rows each), to_model (m), and the sparsity of Phi_q (fixed by the model): the columns
-  each row can fill (CSR: row pointers m + 1, columns nnz, ascending), the columns each pair of rows
-  shares (pair pointers m (m + 1) / 2 + 1 for the pairs (r, c <= r) row by row, columns npair), the rows
-  each column holds (CSC: column pointers n + 1, rows nnz, ascending);
+* ``I`` (int64): header ``[nb, n, m, K, A, d, 0, 0]``, then bJ, bI, bref (K point rows each),
+  aJ, aI (A angle rows each), to_model (m), then at ``d`` a directory (``H_D`` entries: where each list
+  starts, and the number of S entries) and the sparsity of eq. (9) fixed by the model (``_structure``): the
+  columns each row of Phi_q can fill (CSR, ascending), the rows each column holds (CSC), the entries of
+  S = Phi_q M^-1 Phi_q^T that the factorisation reads (rows, columns, and the columns each shares), the
+  symbolic Cholesky factor of S in the rows' order (L's rows and columns) and, per entry of L, the k < j
+  with L[i, k] L[j, k] != 0. The prefix up to to_model is the previous layout (code compiled against it,
+  e.g. a numba cache of a caller, reads it unchanged);
 * ``R`` (float64): header ``[2 alpha, beta^2]``, then sJx, sJy, sIx, sIy, n'x, n'y, ref_is_I
   (K each), c0, omega (A each), 1/M (n), gravity forces (n), M (n);
 
@@ -32,12 +35,13 @@ Work arrays are preallocated by the caller (``Workspace``: ``np.zeros(workspace_
 step allocates nothing but its result. The kernels address it by offsets (``_layout``), not views: Phi_q
 (m x n, row-major), Phi, gamma, the right-hand side and lambda of eq. (9), Phi_t (m each), the Schur
 complement Phi_q M^-1 Phi_q^T and its factor (m x m), Q, M^-1 Q (n each), cos and sin of every body's
-angle (2 (nb + 1)), the RK4 stages and stage state (5 x 2n).
+angle (2 (nb + 1)), the RK4 stages, the stage state (5 x 2n) and the stages' powers (4 x 3).
 
-Sparsity: the products with Phi_q (the Schur complement, its right-hand side, Phi_q^T lambda) run over
-the structurally non-zero columns only, in ascending order, so every sum adds the same non-zero terms in
-the same order as the dense loops: the results are those of the dense evaluation bit for bit (the
-skipped terms are exact zeros).
+Sparsity: the products with Phi_q (the Schur complement, its right-hand side, Phi_q^T lambda) and the
+Cholesky factorisation and solves of S visit only the structurally non-zero entries, in ascending order,
+so every sum adds the same non-zero terms in the same order as the dense loops: the results are those of
+the dense evaluation bit for bit (the skipped terms are exact zeros; tests/test_rhs_kernel.py holds the
+pattern against the NumPy system's non-zeros).
 """
 from __future__ import annotations
 
