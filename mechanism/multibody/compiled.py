@@ -33,5 +33,6 @@ class CompiledSystem:
     def phi(self, q: np.ndarray, t: float) -> np.ndarray:
         """Constraint violations Phi(q, t) (eq. 3), model order."""
         self.accelerations(q, np.zeros(self.n), t, np.zeros(self.n))
-        to_model = self.ints[kn.H_I + 3 * int(self.ints[3]) + 2 * int(self.ints[4]):][: self.m]
-        return kn._slices(self.ints, self.work)[1][to_model].copy()
+        phi = np.empty(self.m)
+        kn.constraints(self.ints, self.work, phi)
+        return phi

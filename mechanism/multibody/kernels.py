@@ -5,8 +5,14 @@ tests/test_kernels.py (1e-12 in accelerations, 1e-9 over a 0.2-revolution trajec
 The model reaches the kernels as data: ``pack(system)`` flattens what ``System`` precomputed
 from a :class:`~mechanism.multibody.model.Model` into two arrays,
 
-* ``I`` (int64): header ``[nb, n, m, K, A, 0, 0, 0]``, then bJ, bI, bref (K point rows each),
-  aJ, aI (A angle rows each), to_model (m);
+* ``I`` (int64): header ``[nb, n, m, K, A, d, 0, 0]``, then bJ, bI, bref (K point rows each),
+  aJ, aI (A angle rows each), to_model (m), then at ``d`` a directory (``H_D`` entries: where each list
+  starts, and the number of S entries) and the sparsity of eq. (9) fixed by the model (``_structure``): the
+  columns each row of Phi_q can fill (CSR, ascending), the rows each column holds (CSC), the entries of
+  S = Phi_q M^-1 Phi_q^T that the factorisation reads (rows, columns, and the columns each shares), the
+  symbolic Cholesky factor of S in the rows' order (L's rows and columns) and, per entry of L, the k < j
+  with L[i, k] L[j, k] != 0. The prefix up to to_model is the previous layout (code compiled against it,
+  e.g. a numba cache of a caller, reads it unchanged);
 * ``R`` (float64): header ``[2 alpha, beta^2]``, then sJx, sJy, sIx, sIy, n'x, n'y, ref_is_I
   (K each), c0, omega (A each), 1/M (n), gravity forces (n), M (n);
 
@@ -25,8 +31,17 @@ stabilisation) and ``mechanism.cosim.joint`` (eq. 10-12, 13-15, 20-23); see thos
 the derivations. Every kernel is ``@njit(cache=True)``: compiled once per machine and kept on
 disk next to this file (``__pycache__``).
 
-Work arrays are preallocated by the caller (``Workspace``) so that a step allocates nothing
-but its result.
+Work arrays are preallocated by the caller (``Workspace``: ``np.zeros(workspace_size(I))``) so that a
+step allocates nothing but its result. The kernels address it by offsets (``_layout``), not views: Phi_q
+(m x n, row-major), Phi, gamma, the right-hand side and lambda of eq. (9), Phi_t (m each), the Schur
+complement Phi_q M^-1 Phi_q^T and its factor (m x m), Q, M^-1 Q (n each), cos and sin of every body's
+angle (2 (nb + 1)), the RK4 stages, the stage state (5 x 2n) and the stages' powers (4 x 3).
+
+Sparsity: the products with Phi_q (the Schur complement, its right-hand side, Phi_q^T lambda) and the
+Cholesky factorisation and solves of S visit only the structurally non-zero entries, in ascending order,
+so every sum adds the same non-zero terms in the same order as the dense loops: the results are those of
+the dense evaluation bit for bit (the skipped terms are exact zeros; tests/test_rhs_kernel.py holds the
+pattern against the NumPy system's non-zeros).
 """
 from __future__ import annotations
 
@@ -36,17 +51,60 @@ import numpy as np
 from numba import njit
 
 H_I = 8   # header length of I
+H_D = 16  # length of the directory of the sparsity lists in I
 H_R = 2   # header length of R
 
 
 # ---------------------------------------------------------------------------------- packing
+def _structure(nb: int, n: int, bJ, bI, aJ, aI) -> list[list[int]]:
+    """The sparsity of eq. (9)'s products, fixed by the model (see the module docstring), as the lists
+    [row pointers, columns, column pointers, rows, S rows, S columns, S pointers, S terms, L row pointers,
+    L row entries, L column pointers, L column entries, common pointers, common entries]."""
+    rows = [sorted({3 * b + d for b in (j, i) if b < nb for d in range(3)}) for j, i in zip(bJ, bI)]
+    rows += [sorted({3 * b + 2 for b in (j, i) if b < nb}) for j, i in zip(aJ, aI)]
+    m = len(rows)
+    cols = [[r for r in range(m) if c in rows[r]] for c in range(n)]
+    # S = Phi_q M^-1 Phi_q^T: rows r, c share a column; the symbolic Cholesky of S in the rows' order:
+    # L[i, j] != 0 if S[i, j] != 0 or L[i, k] L[j, k] != 0 for a k < j
+    terms = {(r, c): sorted(set(rows[r]) & set(rows[c])) for r in range(m) for c in range(r)}
+    lower: list[set[int]] = [set() for _ in range(m)]        # lower[i]: the k < i with L[i, k] != 0
+    for j in range(m):
+        for i in range(j + 1, m):
+            if terms[i, j] or lower[i] & lower[j]:
+                lower[i].add(j)
+    # the entries of S that the factorisation reads: L's pattern (fill-in included: S = 0 there) and the diagonal
+    spairs = [(r, c, terms[r, c] if c < r else rows[r]) for r in range(m) for c in range(r + 1)
+              if c == r or c in lower[r]]
+    lrow = [sorted(x) for x in lower]
+    lcol = [[i for i in range(m) if j in lower[i]] for j in range(m)]
+    common = [sorted(lower[i] & lower[j]) for j in range(m) for i in lcol[j]]
+
+    def csr(lists):
+        ptr = [0]
+        for x in lists:
+            ptr.append(ptr[-1] + len(x))
+        return ptr, [v for x in lists for v in x]
+
+    out = [*csr(rows), *csr(cols), [p[0] for p in spairs], [p[1] for p in spairs], *csr([p[2] for p in spairs])]
+    return out + [*csr(lrow), *csr(lcol), *csr(common)]
+
+
 def pack(system) -> tuple[np.ndarray, np.ndarray]:
     """(I, R): the arrays the kernels read, from a NumPy ``System`` (see the module docstring)."""
     s = system
     nb = s.n // 3
     K, A, m, n = s._K, len(s._aJ), s.m, s.n
-    ints = np.concatenate((np.array([nb, n, m, K, A, 0, 0, 0], np.int64), s._bJ, s._bI, s._bref, s._aJ, s._aI,
-                           s._to_model)).astype(np.int64)
+    rows = [s._bJ, s._bI, s._bref, s._aJ, s._aI, s._to_model]
+    structure = _structure(nb, n, s._bJ, s._bI, s._aJ, s._aI)
+    header = np.array([nb, n, m, K, A, H_I + 3 * K + 2 * A + m, 0, 0], np.int64)
+    directory = np.zeros(H_D, np.int64)       # after to_model: where each list of _structure starts
+    o = header[5] + H_D
+    for k, part in enumerate(structure):
+        directory[k] = o
+        o += len(part)
+    directory[14] = len(structure[4])          # entries of S's pattern
+    ints = np.concatenate([header] + [np.asarray(p, np.int64) for p in rows] + [directory]
+                          + [np.asarray(p, np.int64) for p in structure]).astype(np.int64)
     reals = np.concatenate(([2.0 * s.alpha, s.beta * s.beta], s._sJ.real, s._sJ.imag, s._sI.real, s._sI.imag,
                             s._nprime.real, s._nprime.imag, s._ref_is_I, s._c0, s._omega, s._minv,
                             s._gravity_force, s.mass)).astype(np.float64)
@@ -68,91 +126,62 @@ def pack_link(system, joint=None, contact_points: str = "centres") -> tuple[np.n
 
 
 def workspace_size(ints: np.ndarray) -> int:
+    """Length of the work array W of a model packed as ``ints`` (the layout of ``_layout``)."""
     nb, n, m = int(ints[0]), int(ints[1]), int(ints[2])
-    return m * n + 5 * m + m * m + 2 * n + 10 * n + 2 * (nb + 1)
+    return m * n + 5 * m + m * m + 2 * n + 2 * (nb + 1) + 10 * n + 12
+
+
+@njit(cache=True)
+def _layout(I):
+    """Offsets in W: (phi, gamma, rhs, lambda, Phi_t, S, Q, M^-1 Q, cos/sin, RK4 stages); Phi_q is at 0."""
+    nb, n, m = I[0], I[1], I[2]
+    ophi = m * n
+    oS = ophi + 5 * m
+    oQ = oS + m * m
+    ocs = oQ + 2 * n
+    return ophi, ophi + m, ophi + 2 * m, ophi + 3 * m, ophi + 4 * m, oS, oQ, oQ + n, ocs, ocs + 2 * (nb + 1)
 
 
 # ---------------------------------------------------------------------------------- kinematics
 @njit(cache=True)
-def _slices(I, W):
-    n, m = I[1], I[2]
-    o = 0
-    J = W[o:o + m * n].reshape((m, n))
-    o += m * n
-    phi = W[o:o + m]
-    o += m
-    gam = W[o:o + m]
-    o += m
-    rhs = W[o:o + m]
-    o += m
-    lam = W[o:o + m]
-    o += m
-    phit = W[o:o + m]
-    o += m
-    S = W[o:o + m * m].reshape((m, m))
-    o += m * m
-    Q = W[o:o + n]
-    o += n
-    tmp = W[o:o + n]
-    o += n
-    return J, phi, gam, rhs, lam, phit, S, Q, tmp
-
-
-@njit(cache=True)
-def _rotations(q, I, W):
-    """cos and sin of every body's angle (ground: 1, 0), once per state, in W after the other slices."""
-    nb, n, m = I[0], I[1], I[2]
-    o = m * n + 5 * m + m * m + 2 * n
-    cs = W[o:o + 2 * (nb + 1)].reshape((nb + 1, 2))
+def _rotations(y, I, W):
+    """cos and sin of every body's angle (ground: 1, 0) into W, once per state."""
+    nb = I[0]
+    o = _layout(I)[8]
     for b in range(nb):
-        cs[b, 0] = math.cos(q[3 * b + 2])
-        cs[b, 1] = math.sin(q[3 * b + 2])
-    cs[nb, 0] = 1.0
-    cs[nb, 1] = 0.0
-    return cs
+        th = y[3 * b + 2]
+        W[o + 2 * b] = math.cos(th)
+        W[o + 2 * b + 1] = math.sin(th)
+    W[o + 2 * nb] = 1.0
+    W[o + 2 * nb + 1] = 0.0
 
 
 @njit(cache=True)
-def _body_point_cs(q, qd, nb, b, sx, sy, c, s):
-    """(omega, u_x, u_y, x, y, xd, yd): u = A s' of a point on body b (eq. 10) and the body's state,
-    given c, s = cos, sin of its angle; ground (b = nb): u = s', the rest 0."""
+def _body_point(y, n, nb, b, sx, sy, c, s):
+    """(omega, u_x, u_y, x, y, xd, yd): u = A s' of a point on body b (eq. 10) and the body's state
+    (q = y[:n], qd = y[n:]), given c, s = cos, sin of its angle; ground (b = nb): u = s', the rest 0."""
     if b >= nb:
         return 0.0, sx, sy, 0.0, 0.0, 0.0, 0.0
-    return qd[3 * b + 2], c * sx - s * sy, s * sx + c * sy, q[3 * b], q[3 * b + 1], qd[3 * b], qd[3 * b + 1]
+    return y[n + 3 * b + 2], c * sx - s * sy, s * sx + c * sy, y[3 * b], y[3 * b + 1], y[n + 3 * b], y[n + 3 * b + 1]
 
 
 @njit(cache=True)
-def _body_point(q, qd, nb, b, sx, sy):
-    """``_body_point_cs`` computing the body's cos, sin itself."""
-    if b >= nb:
-        return 0.0, sx, sy, 0.0, 0.0, 0.0, 0.0
-    th = q[3 * b + 2]
-    return _body_point_cs(q, qd, nb, b, sx, sy, math.cos(th), math.sin(th))
-
-
-@njit(cache=True)
-def kinematics(q, qd, t, I, R, W, J, phi, gam, phit):
-    """Phi (eq. 3), Phi_q, gamma (eq. 5) and Phi_t (eq. 4) in internal row order, written in place."""
+def _kinematics(y, t, I, R, W):
+    """Phi (eq. 3), Phi_q, gamma (eq. 5) and Phi_t (eq. 4) of the state y = [q, qd] in internal row order,
+    written in W; the rotations (``_rotations``) of y must be in W."""
     nb, n, m, K, A = I[0], I[1], I[2], I[3], I[4]
-    bJ = I[H_I:H_I + K]
-    bI = I[H_I + K:H_I + 2 * K]
-    bref = I[H_I + 2 * K:H_I + 3 * K]
-    aJ = I[H_I + 3 * K:H_I + 3 * K + A]
-    aI = I[H_I + 3 * K + A:H_I + 3 * K + 2 * A]
-    o = H_R
-    sJx, sJy = R[o:o + K], R[o + K:o + 2 * K]
-    sIx, sIy = R[o + 2 * K:o + 3 * K], R[o + 3 * K:o + 4 * K]
-    npx, npy = R[o + 4 * K:o + 5 * K], R[o + 5 * K:o + 6 * K]
-    refI = R[o + 6 * K:o + 7 * K]
-    c0 = R[o + 7 * K:o + 7 * K + A]
-    om = R[o + 7 * K + A:o + 7 * K + 2 * A]
-    J[:, :] = 0.0
-    cs = _rotations(q, I, W)
+    ophi, ogam, _, _, ophit, _, _, _, ocs, _ = _layout(I)
+    oR = H_R
+    for x in range(m * n):
+        W[x] = 0.0
     for k in range(K):
-        j, i, r = bJ[k], bI[k], bref[k]
+        j, i, r = I[H_I + k], I[H_I + K + k], I[H_I + 2 * K + k]
+        refI = R[oR + 6 * K + k]
         # u = A s' (eq. 10) of each point, its body's position, velocity and angular velocity
-        wj, ujx, ujy, zjx, zjy, zdjx, zdjy = _body_point_cs(q, qd, nb, j, sJx[k], sJy[k], cs[j, 0], cs[j, 1])
-        wi, uix, uiy, zix, ziy, zdix, zdiy = _body_point_cs(q, qd, nb, i, sIx[k], sIy[k], cs[i, 0], cs[i, 1])
+        wj, ujx, ujy, zjx, zjy, zdjx, zdjy = _body_point(y, n, nb, j, R[oR + k], R[oR + K + k],
+                                                         W[ocs + 2 * j], W[ocs + 2 * j + 1])
+        wi, uix, uiy, zix, ziy, zdix, zdiy = _body_point(y, n, nb, i, R[oR + 2 * K + k], R[oR + 3 * K + k],
+                                                         W[ocs + 2 * i], W[ocs + 2 * i + 1])
         dx = (zjx - zix) + (ujx - uix)                     # d = r_J^P - r_I^P
         dy = (zjy - ziy) + (ujy - uiy)
         wujx, wujy = wj * ujx, wj * ujy
@@ -160,216 +189,259 @@ def kinematics(q, qd, t, I, R, W, J, phi, gam, phit):
         dcx = wj * wujx - wi * wuix                        # -(relative centripetal acceleration)
         dcy = wj * wujy - wi * wuiy
         # n = A_ref n'; cn = conj(n)
-        if r < nb and refI[k] != 0.0:
-            cr, sr = cs[r, 0], cs[r, 1]
-            nx, ny = cr * npx[k] - sr * npy[k], sr * npx[k] + cr * npy[k]
-            wr = qd[3 * r + 2]
+        npx, npy = R[oR + 4 * K + k], R[oR + 5 * K + k]
+        if r < nb and refI != 0.0:
+            cr, sr = W[ocs + 2 * r], W[ocs + 2 * r + 1]
+            nx, ny = cr * npx - sr * npy, sr * npx + cr * npy
+            wr = y[n + 3 * r + 2]
         else:
-            nx, ny = npx[k], npy[k]
+            nx, ny = npx, npy
             wr = 0.0
         cnx, cny = nx, -ny
         p = cnx * dx - cny * dy                            # Re(conj(n) d), eq. (3)
-        phi[k] = p
-        if wr != 0.0 or refI[k] != 0.0:
+        W[ophi + k] = p
+        if wr != 0.0 or refI != 0.0:
             ddx = (zdjx - zdix) - (wujy - wuiy)            # relative point velocity
             ddy = (zdjy - zdiy) + (wujx - wuix)
             ax = dcx - 2.0 * wr * ddy                      # dcen + 2 i wr dd
             ay = dcy + 2.0 * wr * ddx
-            gam[k] = wr * wr * p + (cnx * ax - cny * ay)   # eq. (5), n turning with body I
+            W[ogam + k] = wr * wr * p + (cnx * ax - cny * ay)   # eq. (5), n turning with body I
         else:
-            gam[k] = cnx * dcx - cny * dcy                 # eq. (5), fixed n
-        phit[k] = 0.0
+            W[ogam + k] = cnx * dcx - cny * dcy            # eq. (5), fixed n
+        W[ophit + k] = 0.0
         # Phi_q = Re(conj(n) G): x -> 1, y -> i, theta -> i u (J), minus for I, plus the turning n
+        o = k * n
         if j < nb:
-            J[k, 3 * j] += cnx
-            J[k, 3 * j + 1] += -cny
-            J[k, 3 * j + 2] += -(cnx * ujy + cny * ujx)    # Re(cn * i uJ)
+            W[o + 3 * j] += cnx
+            W[o + 3 * j + 1] += -cny
+            W[o + 3 * j + 2] += -(cnx * ujy + cny * ujx)   # Re(cn * i uJ)
         if i < nb:
-            J[k, 3 * i] += -cnx
-            J[k, 3 * i + 1] += cny
-            gx = uix + refI[k] * dx
-            gy = uiy + refI[k] * dy
-            J[k, 3 * i + 2] += cnx * gy + cny * gx         # Re(cn * (-i g))
+            W[o + 3 * i] += -cnx
+            W[o + 3 * i + 1] += cny
+            gx = uix + refI * dx
+            gy = uiy + refI * dy
+            W[o + 3 * i + 2] += cnx * gy + cny * gx        # Re(cn * (-i g))
+    oc0 = oR + 7 * K
     for a in range(A):
         row = K + a
-        j, i = aJ[a], aI[a]
-        thj = q[3 * j + 2] if j < nb else 0.0
-        thi = q[3 * i + 2] if i < nb else 0.0
-        phi[row] = thj - thi - (c0[a] + om[a] * t)
-        gam[row] = 0.0
-        phit[row] = -om[a]
+        j, i = I[H_I + 3 * K + a], I[H_I + 3 * K + A + a]
+        thj = y[3 * j + 2] if j < nb else 0.0
+        thi = y[3 * i + 2] if i < nb else 0.0
+        om = R[oc0 + A + a]
+        W[ophi + row] = thj - thi - (R[oc0 + a] + om * t)
+        W[ogam + row] = 0.0
+        W[ophit + row] = -om
+        o = row * n
         if j < nb:
-            J[row, 3 * j + 2] += 1.0
+            W[o + 3 * j + 2] += 1.0
         if i < nb:
-            J[row, 3 * i + 2] -= 1.0
+            W[o + 3 * i + 2] -= 1.0
 
 
 @njit(cache=True)
-def _cholesky_solve(S, b):
-    """Solve S x = b in place in b (S symmetric positive semidefinite, overwritten by its factor).
+def _cholesky_solve(I, W, oS, ob):
+    """Solve S x = b in place in b (S: the lower triangle of W[oS:oS + m m], row-major, symmetric positive
+    semidefinite, overwritten by its factor L; b = W[ob:ob + m]), visiting only the entries of L's pattern
+    (``_structure``): the operations of the dense Cholesky that involve a non-zero, in its order.
 
     A pivot below 1e-12 of the largest diagonal entry (a redundant constraint) is dropped: that
     unknown is set to 0, which solves a consistent redundant system (a basic, not the minimum-norm,
     solution; the accelerations M^-1 (Q - Phi_q^T lam) are the same). Returns the number of
     dropped pivots."""
-    m = S.shape[0]
+    m = I[2]
+    d = I[5]                                              # the directory (``pack``)
+    lrp, lrc, lcp, lcr, cmp, cmk = I[d + 8], I[d + 9], I[d + 10], I[d + 11], I[d + 12], I[d + 13]
     big = 0.0
     for j in range(m):
-        big = max(big, abs(S[j, j]))
+        big = max(big, abs(W[oS + j * m + j]))
     tol = 1e-12 * big
     dropped = 0
+    q = cmp                                               # the common entries' pointers, column by column
     for j in range(m):
-        d = S[j, j]
-        for k in range(j):
-            d -= S[j, k] * S[j, k]
+        rj = oS + j * m
+        d = W[rj + j]
+        for p in range(I[lrp + j], I[lrp + j + 1]):
+            k = I[lrc + p]
+            d -= W[rj + k] * W[rj + k]
         if not d > tol:
             dropped += 1
-            for i in range(j, m):
-                S[i, j] = 0.0
+            W[rj + j] = 0.0
+            for p in range(I[lcp + j], I[lcp + j + 1]):
+                W[oS + I[lcr + p] * m + j] = 0.0
+            q += I[lcp + j + 1] - I[lcp + j]
             continue
         d = math.sqrt(d)
-        S[j, j] = d
-        for i in range(j + 1, m):
-            s = S[i, j]
-            for k in range(j):
-                s -= S[i, k] * S[j, k]
-            S[i, j] = s / d
+        W[rj + j] = d
+        for p in range(I[lcp + j], I[lcp + j + 1]):
+            ri = oS + I[lcr + p] * m
+            s = W[ri + j]
+            for c in range(I[q], I[q + 1]):
+                k = I[cmk + c]
+                s -= W[ri + k] * W[rj + k]
+            q += 1
+            W[ri + j] = s / d
     for i in range(m):
-        if S[i, i] == 0.0:
-            b[i] = 0.0
+        ri = oS + i * m
+        if W[ri + i] == 0.0:
+            W[ob + i] = 0.0
             continue
-        s = b[i]
-        for k in range(i):
-            s -= S[i, k] * b[k]
-        b[i] = s / S[i, i]
+        s = W[ob + i]
+        for p in range(I[lrp + i], I[lrp + i + 1]):
+            k = I[lrc + p]
+            s -= W[ri + k] * W[ob + k]
+        W[ob + i] = s / W[ri + i]
     for i in range(m - 1, -1, -1):
-        if S[i, i] == 0.0:
-            b[i] = 0.0
+        if W[oS + i * m + i] == 0.0:
+            W[ob + i] = 0.0
             continue
-        s = b[i]
-        for k in range(i + 1, m):
-            s -= S[k, i] * b[k]
-        b[i] = s / S[i, i]
+        s = W[ob + i]
+        for p in range(I[lcp + i], I[lcp + i + 1]):
+            k = I[lcr + p]
+            s -= W[oS + k * m + i] * W[ob + k]
+        W[ob + i] = s / W[oS + i * m + i]
     return dropped
 
 
 @njit(cache=True)
-def solve(qd, Q, I, R, W, qdd):
-    """Eq. (9) with Baumgarte's gamma* for kinematics already in W: qdd (written) and lambda
-    (internal order, left in W). (Phi_q M^-1 Phi_q^T) lam = Phi_q M^-1 Q - gamma*, qdd = M^-1 (Q - Phi_q^T lam)."""
+def _solve(y, I, R, W, dy):
+    """Eq. (9) with Baumgarte's gamma* for the kinematics and Q in W: qdd into dy[n:] and lambda (internal
+    order) in W. (Phi_q M^-1 Phi_q^T) lam = Phi_q M^-1 Q - gamma*, qdd = M^-1 (Q - Phi_q^T lam)."""
     n, m, K, A = I[1], I[2], I[3], I[4]
-    o = H_R + 7 * K + 2 * A
-    minv = R[o:o + n]
+    ophi, ogam, orhs, olam, ophit, oS, oQ, otmp, _, _ = _layout(I)
+    d = I[5]                                               # the directory (``pack``)
+    orp, orc, ocp, ocr = I[d], I[d + 1], I[d + 2], I[d + 3]
+    osr, osc, osp, ost = I[d + 4], I[d + 5], I[d + 6], I[d + 7]
+    om = H_R + 7 * K + 2 * A                               # 1/M in R
     a2, b2 = R[0], R[1]
-    J, phi, gam, rhs, lam, phit, S, _, tmp = _slices(I, W)
     for i in range(n):
-        tmp[i] = minv[i] * Q[i]
-    for r in range(m):
+        W[otmp + i] = R[om + i] * W[oQ + i]
+    for r in range(m):                                     # Phi_q M^-1 Q - gamma*
         s = 0.0
         pd = 0.0
-        for i in range(n):
-            s += J[r, i] * tmp[i]
-            pd += J[r, i] * qd[i]
-        rhs[r] = s - gam[r] + a2 * (pd + phit[r]) + b2 * phi[r]
-        for c in range(r + 1):
-            v = 0.0
-            for i in range(n):
-                v += J[r, i] * minv[i] * J[c, i]
-            S[r, c] = v
-            S[c, r] = v
-    for r in range(m):
-        lam[r] = rhs[r]
+        o = r * n
+        for p in range(I[orp + r], I[orp + r + 1]):
+            c = I[orc + p]
+            s += W[o + c] * W[otmp + c]
+            pd += W[o + c] * y[n + c]
+        W[orhs + r] = s - W[ogam + r] + a2 * (pd + W[ophit + r]) + b2 * W[ophi + r]
+        W[olam + r] = W[orhs + r]
+    for e in range(I[d + 14]):                                 # S = Phi_q M^-1 Phi_q^T, its pattern's lower triangle
+        o, oc = I[osr + e] * n, I[osc + e] * n
+        v = 0.0
+        for p in range(I[osp + e], I[osp + e + 1]):
+            i = I[ost + p]
+            v += W[o + i] * R[om + i] * W[oc + i]
+        W[oS + I[osr + e] * m + I[osc + e]] = v
     if m > 0:
-        _cholesky_solve(S, lam)                            # redundant rows dropped (see there)
-    for i in range(n):
-        v = tmp[i]
-        for r in range(m):
-            v -= minv[i] * J[r, i] * lam[r]
-        qdd[i] = v
+        _cholesky_solve(I, W, oS, olam)                    # redundant rows dropped (see there)
+    for i in range(n):                                     # M^-1 (Q - Phi_q^T lam)
+        v = W[otmp + i]
+        for p in range(I[ocp + i], I[ocp + i + 1]):
+            r = I[ocr + p]
+            v -= R[om + i] * W[r * n + i] * W[olam + r]
+        dy[n + i] = v
 
 
 @njit(cache=True)
 def accelerations(q, qd, t, Q, I, R, W, qdd):
     """Kinematics and eq. (9) for the state (q, qd, t) and applied forces Q: qdd written, lambda in W."""
-    J, phi, gam, _, _, phit, _, _, _ = _slices(I, W)
-    kinematics(q, qd, t, I, R, W, J, phi, gam, phit)
-    solve(qd, Q, I, R, W, qdd)
+    n = I[1]
+    y = np.concatenate((q, qd))
+    dy = np.empty(2 * n)
+    oQ = _layout(I)[6]
+    for i in range(n):
+        W[oQ + i] = Q[i]
+    _rotations(y, I, W)
+    _kinematics(y, t, I, R, W)
+    _solve(y, I, R, W, dy)
+    for i in range(n):
+        qdd[i] = dy[n + i]
 
 
 @njit(cache=True)
 def multipliers(I, W, lam_model):
     """Lambda of the last solve, in model order."""
-    m, K, A = I[2], I[3], I[4]
-    to_model = I[H_I + 3 * K + 2 * A:H_I + 3 * K + 2 * A + m]
-    lam = _slices(I, W)[4]
-    for k in range(m):
-        lam_model[k] = lam[to_model[k]]
+    olam = _layout(I)[3]
+    otm = H_I + 3 * I[3] + 2 * I[4]
+    for k in range(I[2]):
+        lam_model[k] = W[olam + I[otm + k]]
+
+
+@njit(cache=True)
+def constraints(I, W, phi_model):
+    """Phi of the last kinematics evaluation, in model order."""
+    ophi = _layout(I)[0]
+    otm = H_I + 3 * I[3] + 2 * I[4]
+    for k in range(I[2]):
+        phi_model[k] = W[ophi + I[otm + k]]
 
 
 @njit(cache=True)
 def max_violation(I, W):
     """max |Phi| of the last kinematics evaluation [m or rad]."""
-    phi = _slices(I, W)[1]
+    ophi = _layout(I)[0]
     v = 0.0
-    for k in range(phi.shape[0]):
-        a = abs(phi[k])
-        if a > v:
+    for k in range(I[2]):
+        a = abs(W[ophi + k])
+        if a > v:                                          # noqa: PLR1730 (a NaN is skipped, as before)
             v = a
     return v
 
 
 # ---------------------------------------------------------------------------------- force joint
 @njit(cache=True)
-def _point(q, qd, nb, b, sx, sy):
-    """(x, y, xd, yd) of a point s' on body b (eq. 10-12); ground: (s', 0)."""
-    w, ux, uy, x, y, xd, yd = _body_point(q, qd, nb, b, sx, sy)
-    return x + ux, y + uy, xd - w * uy, yd + w * ux
+def _point(y, n, nb, b, sx, sy, W, ocs):
+    """(x, y, xd, yd) of a point s' on body b (eq. 10-12) with the body's cos, sin in W; ground: (s', 0)."""
+    w, ux, uy, x, yy, xd, yd = _body_point(y, n, nb, b, sx, sy, W[ocs + 2 * b], W[ocs + 2 * b + 1])
+    return x + ux, yy + uy, xd - w * uy, yd + w * ux
 
 
 @njit(cache=True)
-def link_inputs(q, qd, nb, L, LR, u):
-    """The bearing's inputs (e_x, e_y, v_x, v_y, omega_inner, omega_outer), eq. (10)-(12), into u."""
+def _link_inputs(y, I, L, LR, W, u):
+    """The bearing's inputs (e_x, e_y, v_x, v_y, omega_inner, omega_outer) of y, eq. (10)-(12), into u;
+    the rotations of y (``_rotations``) must be in W."""
+    nb, n = I[0], I[1]
+    ocs = _layout(I)[8]
     hb, jb = L[1], L[2]
-    xi, yi, vxi, vyi = _point(q, qd, nb, hb, LR[0], LR[1])
-    xj, yj, vxj, vyj = _point(q, qd, nb, jb, LR[2], LR[3])
+    xi, yi, vxi, vyi = _point(y, n, nb, hb, LR[0], LR[1], W, ocs)
+    xj, yj, vxj, vyj = _point(y, n, nb, jb, LR[2], LR[3], W, ocs)
     u[0] = xj - xi
     u[1] = yj - yi
     u[2] = vxj - vxi
     u[3] = vyj - vyi
-    u[4] = qd[3 * jb + 2] if jb < nb else 0.0
-    u[5] = qd[3 * hb + 2] if hb < nb else 0.0
+    u[4] = y[n + 3 * jb + 2] if jb < nb else 0.0
+    u[5] = y[n + 3 * hb + 2] if hb < nb else 0.0
 
 
 @njit(cache=True)
-def _add_point_force(Q, q, nb, b, sx, sy, fx, fy, at, ax, ay):
+def _add_point_force(W, oQ, y, nb, b, fx, fy, ax, ay):
+    """Generalized force of F = (fx, fy) applied at (ax, ay) on body b into Q = W[oQ:] (eq. 20-23)."""
     if b >= nb:
         return
     i = 3 * b
-    if not at:
-        th = q[i + 2]
-        c, s = math.cos(th), math.sin(th)
-        ax = q[i] + (c * sx - s * sy)
-        ay = q[i + 1] + (s * sx + c * sy)
-    Q[i] += fx
-    Q[i + 1] += fy
-    Q[i + 2] += (ax - q[i]) * fy - (ay - q[i + 1]) * fx
+    W[oQ + i] += fx
+    W[oQ + i + 1] += fy
+    W[oQ + i + 2] += (ax - y[i]) * fy - (ay - y[i + 1]) * fx
 
 
 @njit(cache=True)
-def add_link_force(Q, q, nb, L, LR, ex, ey, fx, fy):
-    """Generalized forces of F on the housing body and -F on the journal body, eq. (20)-(23)."""
+def _add_link_force(y, I, L, LR, W, ex, ey, fx, fy):
+    """Generalized forces of F on the housing body and -F on the journal body into Q in W, eq. (20)-(23);
+    the rotations of y (``_rotations``) must be in W."""
+    nb, n = I[0], I[1]
+    oQ, _, ocs = _layout(I)[6:9]
     hb, jb = L[1], L[2]
+    xi, yi, _, _ = _point(y, n, nb, hb, LR[0], LR[1], W, ocs)
+    xj, yj, _, _ = _point(y, n, nb, jb, LR[2], LR[3], W, ocs)
     if L[3] == 1:                                         # eq. (14)-(15): at the contact points
         e = math.hypot(ex, ey)
         if e > 0.0:
             nx, ny = ex / e, ey / e
-            xi, yi, _, _ = _point(q, q, nb, hb, LR[0], LR[1])
-            xj, yj, _, _ = _point(q, q, nb, jb, LR[2], LR[3])
-            _add_point_force(Q, q, nb, hb, LR[0], LR[1], fx, fy, True, xi + LR[4] * nx, yi + LR[4] * ny)
-            _add_point_force(Q, q, nb, jb, LR[2], LR[3], -fx, -fy, True, xj + LR[5] * nx, yj + LR[5] * ny)
+            _add_point_force(W, oQ, y, nb, hb, fx, fy, xi + LR[4] * nx, yi + LR[4] * ny)
+            _add_point_force(W, oQ, y, nb, jb, -fx, -fy, xj + LR[5] * nx, yj + LR[5] * ny)
             return
-    _add_point_force(Q, q, nb, hb, LR[0], LR[1], fx, fy, False, 0.0, 0.0)
-    _add_point_force(Q, q, nb, jb, LR[2], LR[3], -fx, -fy, False, 0.0, 0.0)
+    _add_point_force(W, oQ, y, nb, hb, fx, fy, xi, yi)    # at the ring centres
+    _add_point_force(W, oQ, y, nb, jb, -fx, -fy, xj, yj)
 
 
 @njit(cache=True)
@@ -383,27 +455,29 @@ def force_of_model(fm, tau, ex, ey, vx, vy):
 
 # ---------------------------------------------------------------------------------- the step
 @njit(cache=True)
-def applied(q, I, R, Q):
-    """Q^A of gravity [N, N, N m] into Q."""
+def _applied(I, R, W):
+    """Q^A of gravity [N, N, N m] into Q in W."""
     n, K, A = I[1], I[3], I[4]
     o = H_R + 7 * K + 2 * A + n
+    oQ = _layout(I)[6]
     for i in range(n):
-        Q[i] = R[o + i]
+        W[oQ + i] = R[o + i]
 
 
 @njit(cache=True)
 def rhs(tau, y, fm, I, R, L, LR, W, u, dy):
     """dy/dt = [qd, qdd] with the force joint's force given by the force model fm."""
     n = I[1]
-    q, qd = y[:n], y[n:]
-    Q = _slices(I, W)[7]
-    applied(q, I, R, Q)
+    _rotations(y, I, W)
+    _applied(I, R, W)
     if L[0] == 1:
-        link_inputs(q, qd, I[0], L, LR, u)
+        _link_inputs(y, I, L, LR, W, u)
         fx, fy = force_of_model(fm, tau, u[0], u[1], u[2], u[3])
-        add_link_force(Q, q, I[0], L, LR, u[0], u[1], fx, fy)
-    dy[:n] = qd
-    accelerations(q, qd, tau, Q, I, R, W, dy[n:])
+        _add_link_force(y, I, L, LR, W, u[0], u[1], fx, fy)
+    for i in range(n):
+        dy[i] = y[n + i]
+    _kinematics(y, tau, I, R, W)
+    _solve(y, I, R, W, dy)
 
 
 @njit(cache=True)
@@ -414,24 +488,22 @@ def powers(y, I, R, W):
     With the velocity constraints met, dT/dt is their sum (eq. 4, 7, 9); the energy account integrates them
     with the RK4 stages (``advance``)."""
     n, m, K, A = I[1], I[2], I[3], I[4]
-    ol = m * n + 3 * m                     # lambda, Phi_t and Q in W (the layout of _slices)
-    oq = m * n + 5 * m + m * m
+    _, _, _, olam, ophit, _, oQ, _, _, _ = _layout(I)
     drive = 0.0
     for r in range(m):
-        drive += W[ol + r] * W[ol + m + r]
+        drive += W[olam + r] * W[ophit + r]
     o = H_R + 7 * K + 2 * A + n
     app = 0.0
     total = 0.0
     for i in range(n):
         app += R[o + i] * y[n + i]
-        total += W[oq + i] * y[n + i]
+        total += W[oQ + i] * y[n + i]
     return drive, app, total - app
 
 
 @njit(cache=True)
 def _stage_row(stages, row, y, u, nb, L):
     """The energy account's record of a stage state: its bearing inputs u and the ring angles (journal, housing)."""
-    n = y.shape[0] // 2
     for i in range(6):
         stages[row, i] = u[i]
     stages[row, 6] = y[3 * L[2] + 2] if L[2] < nb else 0.0
@@ -455,58 +527,51 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc
     for the bearing side of the account (``mechanism.cosim.energy``).
     """
     N = y.shape[0]
-    n = N // 2
-    k2 = np.empty(N)
-    k3 = np.empty(N)
-    k4 = np.empty(N)
-    kk = np.empty(N)
-    yt = np.empty(N)
+    ork = _layout(I)[9]                  # in W: the four stages' dy/dt, the stage state, the stages' powers
+    yt = W[ork + 4 * N:ork + 5 * N]
+    opw = ork + 5 * N
     y = y.copy()
     h2 = 0.5 * hs
     account = acc is not None and p1 is not None and stages is not None
     nb = I[0]
-    a1 = b1 = c1 = a2 = b2 = c2 = a3 = b3 = c3 = a4 = b4 = c4 = 0.0
     for sub in range(substeps):
         t = t0 + sub * hs
-        if sub > 0 or not k1_valid:
-            rhs(t, y, fm, I, R, L, LR, W, u, kk)
+        for st in range(4):                                # one rhs call site: inlined once
+            k = W[ork + st * N:ork + (st + 1) * N]
+            if st == 0:
+                ts = t
+                for i in range(N):
+                    yt[i] = y[i]
+            else:
+                cs = h2 if st < 3 else hs                  # y + h/2 k1, y + h/2 k2, y + h k3
+                ts = t + cs
+                o = ork + (st - 1) * N
+                for i in range(N):
+                    yt[i] = y[i] + cs * W[o + i]
+            if st == 0 and sub == 0 and k1_valid:
+                for i in range(N):
+                    k[i] = k1[i]
+                if account:
+                    W[opw], W[opw + 1], W[opw + 2] = p1[0], p1[1], p1[2]
+                    if L[0] == 1:
+                        _rotations(y, I, W)
+                        _link_inputs(y, I, L, LR, W, u)
+            else:
+                rhs(ts, yt, fm, I, R, L, LR, W, u, k)
+                if account:
+                    o = opw + 3 * st
+                    W[o], W[o + 1], W[o + 2] = powers(yt, I, R, W)
             if account:
-                a1, b1, c1 = powers(y, I, R, W)
-        else:
-            kk[:] = k1
-            if account:
-                a1, b1, c1 = p1[0], p1[1], p1[2]
-                if L[0] == 1:
-                    link_inputs(y[:n], y[n:], nb, L, LR, u)
-        if account:
-            _stage_row(stages, 5 * sub, y, u, nb, L)
-        for i in range(N):
-            yt[i] = y[i] + h2 * kk[i]
-        rhs(t + h2, yt, fm, I, R, L, LR, W, u, k2)
-        if account:
-            a2, b2, c2 = powers(yt, I, R, W)
-            _stage_row(stages, 5 * sub + 1, yt, u, nb, L)
-        for i in range(N):
-            yt[i] = y[i] + h2 * k2[i]
-        rhs(t + h2, yt, fm, I, R, L, LR, W, u, k3)
-        if account:
-            a3, b3, c3 = powers(yt, I, R, W)
-            _stage_row(stages, 5 * sub + 2, yt, u, nb, L)
-        for i in range(N):
-            yt[i] = y[i] + hs * k3[i]
-        rhs(t + hs, yt, fm, I, R, L, LR, W, u, k4)
-        if account:
-            a4, b4, c4 = powers(yt, I, R, W)
-            _stage_row(stages, 5 * sub + 3, yt, u, nb, L)
+                _stage_row(stages, 5 * sub + st, yt, u, nb, L)
         c = hs / 6.0
         for i in range(N):
-            y[i] = y[i] + c * (kk[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
+            y[i] = y[i] + c * (W[ork + i] + 2.0 * (W[ork + N + i] + W[ork + 2 * N + i]) + W[ork + 3 * N + i])
         if account:
-            acc[0] += c * (a1 + 2.0 * (a2 + a3) + a4)
-            acc[1] += c * (b1 + 2.0 * (b2 + b3) + b4)
-            acc[2] += c * (c1 + 2.0 * (c2 + c3) + c4)
+            for j in range(3):
+                acc[j] += c * (W[opw + j] + 2.0 * (W[opw + 3 + j] + W[opw + 6 + j]) + W[opw + 9 + j])
             if L[0] == 1:
-                link_inputs(y[:n], y[n:], nb, L, LR, u)
+                _rotations(y, I, W)
+                _link_inputs(y, I, L, LR, W, u)
             _stage_row(stages, 5 * sub + 4, y, u, nb, L)
     finite = True
     for i in range(N):
@@ -522,11 +587,10 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc
 @njit(cache=True)
 def prepare(y, t, I, R, L, LR, W, u):
     """Kinematics of the state y at t into W and its bearing inputs into u (the tail of ``advance``)."""
-    n = I[1]
-    J, phi, gam, _, _, phit, _, _, _ = _slices(I, W)
-    kinematics(y[:n], y[n:], t, I, R, W, J, phi, gam, phit)
+    _rotations(y, I, W)
+    _kinematics(y, t, I, R, W)
     if L[0] == 1:
-        link_inputs(y[:n], y[n:], I[0], L, LR, u)
+        _link_inputs(y, I, L, LR, W, u)
 
 
 @njit(cache=True)
@@ -540,26 +604,25 @@ def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t,
     Q^C = -Phi_q^T lambda (eq. 7) on those coordinates (the ideal joint's force on the housing body).
     ``p1`` (energy account), if given, receives the ``powers`` there (the next step's first stage)."""
     n = I[1]
-    q, qd = y[:n], y[n:]
-    Q = _slices(I, W)[7]
-    applied(q, I, R, Q)
+    _applied(I, R, W)
     if L[0] == 1:
-        add_link_force(Q, q, I[0], L, LR, ex, ey, fx, fy)
-    dy[:n] = qd
-    solve(qd, Q, I, R, W, dy[n:])
+        _rotations(y, I, W)
+        _add_link_force(y, I, L, LR, W, ex, ey, fx, fy)
+    for i in range(n):
+        dy[i] = y[n + i]
+    _solve(y, I, R, W, dy)
     multipliers(I, W, lam)
     if p1 is not None:
         p1[0], p1[1], p1[2] = powers(y, I, R, W)
     if row.shape[0] > 0 and L[0] == 0 and react.shape[0] == 4:
-        m, K, A = I[2], I[3], I[4]
-        to_model = I[H_I + 3 * K + 2 * A:H_I + 3 * K + 2 * A + m]
-        J = _slices(I, W)[0]
+        otm = H_I + 3 * I[3] + 2 * I[4]
         fx = fy = 0.0
         for r in range(react[0], react[1]):
-            fx -= J[to_model[r], react[2]] * lam[r]
-            fy -= J[to_model[r], react[3]] * lam[r]
+            k = I[otm + r]
+            fx -= W[k * n + react[2]] * lam[r]
+            fy -= W[k * n + react[3]] * lam[r]
     if row.shape[0] > 0:
-        fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, kinetic_energy(qd, I, R), n)
+        fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, kinetic_energy(y, I, R), n)
 
 
 @njit(cache=True)
@@ -591,11 +654,11 @@ def fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, ke, n):
 
 
 @njit(cache=True)
-def kinetic_energy(qd, I, R):
-    """T = qd^T M qd / 2 [J]."""
+def kinetic_energy(y, I, R):
+    """T = qd^T M qd / 2 [J] of the state y = [q, qd]."""
     n, K, A = I[1], I[3], I[4]
     o = H_R + 7 * K + 2 * A + 2 * n
     T = 0.0
     for i in range(n):
-        T += R[o + i] * (qd[i] * qd[i])
+        T += R[o + i] * (y[n + i] * y[n + i])
     return 0.5 * T
