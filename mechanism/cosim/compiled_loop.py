@@ -61,6 +61,22 @@ MODELS = {"jacobian": 0, "zoh": 1, "extrap1": 2, "extrap2": 3}
 
 
 @njit(cache=True)
+def _copy(dst, src, n):
+    """dst[:n] = src[:n] for 1-D arrays, as a loop (a slice assignment compiles numba's broadcasting checks and
+    their error paths: seconds of the first run's compile, docs/kernels.md)."""
+    for i in range(n):
+        dst[i] = src[i]
+
+
+@njit(cache=True)
+def _copy_rows(dst, src, rows):
+    """dst[:rows, :] = src[:rows, :] for 2-D arrays of the same width, as a loop (see ``_copy``)."""
+    for i in range(rows):
+        for j in range(src.shape[1]):
+            dst[i, j] = src[i, j]
+
+
+@njit(cache=True)
 def sym_eig_max(a, b, c):
     """Largest eigenvalue of [[a, b], [b, c]] (``master._sym_eig_max``)."""
     return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
@@ -106,7 +122,8 @@ def hold_model(model, past, npast, fm):
     (``LinearExtrapolation``: F_n + (F_n - F_{n-1}) (tau - t_n) / (t_n - t_{n-1})), ``extrap2``
     (``QuadraticExtrapolation``: the Newton form through the last three forces), lower order until the history
     exists (``model``: their ``MODELS`` codes)."""
-    fm[:] = 0.0
+    for i in range(fm.shape[0]):
+        fm[i] = 0.0
     c = past[npast - 1]
     fm[0], fm[1], fm[2] = c[0], c[5], c[6]
     if model == 2 or (model == 3 and npast == 2):
@@ -128,7 +145,7 @@ def trial_model(a, x, jumps, njumps, fm):
     """``InterfaceJacobianImplicit.begin_step`` with a trial: the mean tangent matrices, the step's own drift
     through both ends (start exchange a, the last pass's end x) and the onset jumps' quadratic terms, into fm."""
     m = np.empty(13)
-    m[:7] = a[:7]
+    _copy(m, a, 7)
     for i in range(6):
         m[7 + i] = 0.5 * (a[7 + i] + x[7 + i])
     px, py = _linear(m, x[1], x[2], x[3], x[4])
@@ -301,7 +318,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
     for step in range(first, last + 1):
         t0 = (step - 1) * h
         t = step * h
-        start[:] = past[npast - 1]
+        _copy(start, past[npast - 1], start.shape[0])
         cage_start = 0.0
         if has_law:   # energy.kinematic_cage_angle
             cage_start = fset[5] + ((y[tj] - fset[6]) * PC[11] + (y[ti] - fset[7]) * PC[12])
@@ -313,9 +330,9 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                 _fail(fail, COMPONENT, step, t, status, GET_STATE)
                 return y
             counts[9] += 1
-            snap_past[:, :] = past
-            snap_xin[:] = xin
-            snap_xf[:] = xf
+            _copy_rows(snap_past, past, past.shape[0])
+            _copy(snap_xin, xin, xin.shape[0])
+            _copy(snap_xf, xf, xf.shape[0])
         have_prev = False
         have_trial = False
         ntrial = 0
@@ -343,7 +360,8 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             k1v = iset[10] != 0 and k1_valid(fm, t0, xin, xf)
             # with the account's arrays also without an account (one specialisation to compile): the powers and
             # stages are computed and not used, the state and the inputs are the same
-            acc[:] = 0.0
+            for i in range(acc.shape[0]):
+                acc[i] = 0.0
             y_end, drift, finite = advance(y, t0, hs, m, t, fm, dy, k1v, I, R, L, LR, W, u, acc, p1, stages)
             if not finite:
                 _fail(fail, NOT_FINITE, step, t)
@@ -402,20 +420,20 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                     and next_pass_negligible(fm, end, mobility, h, tol):
                 counts[6] += 1
                 break
-            prev[:] = end
+            _copy(prev, end, end.shape[0])
             have_prev = True
-            trial[:] = end
-            past[:, :] = snap_past
+            _copy(trial, end, end.shape[0])
+            _copy_rows(past, snap_past, past.shape[0])
             npast = snap_npast
             iset[13] = npast
-            xin[:] = snap_xin
-            xf[:] = snap_xf
+            _copy(xin, snap_xin, xin.shape[0])
+            _copy(xf, snap_xf, xf.shape[0])
             status = cc.restore(kind, cs, snap_cs, H, state)
             if status < 0 or status > 1:
                 _fail(fail, COMPONENT, step, t, status, SET_STATE)
                 _release(kind, H, state, counts)
                 return y
-            trial_jumps[:nj] = jumps[:nj]
+            _copy_rows(trial_jumps, jumps, nj)
             ntrial = nj
             have_trial = True
         if iterative:   # CouplingLoop.release

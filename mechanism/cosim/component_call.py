@@ -42,7 +42,8 @@ def exchange(kind, P, eccentricity_limit, cs, H, vr_in, vr_out, t0, h, sent, out
 def save(kind, cs, snap, H):
     """Save the component's state: (status, the FMU state's pointer; 0 in-process: the copy is in ``snap``)."""
     if kind == IN_PROCESS:
-        snap[:] = cs
+        for i in range(cs.shape[0]):   # a loop, not a slice assignment (compile time, compiled_loop._copy)
+            snap[i] = cs[i]
         return 0, 0
     status, state = fmu_native.get_state(H)
     return status, state
@@ -52,7 +53,8 @@ def save(kind, cs, snap, H):
 def restore(kind, cs, snap, H, state) -> int:
     """Roll the component back to the state ``save`` made (it stays valid for another restore)."""
     if kind == IN_PROCESS:
-        cs[:] = snap
+        for i in range(cs.shape[0]):
+            cs[i] = snap[i]
         return 0
     return fmu_native.set_state(H, state)
 
