@@ -90,7 +90,7 @@ def test_twenty_balls_undamped_every_third_step(monkeypatch):
     """300 rpm, 20 (overlapping) balls, no damping, a sample every 3rd step."""
     ref, _ = _compare(RunConfig(mode="inprocess", rpm=300, revs=0.05, step=1e-5, balls=20, record_every=3, progress=False,
                                 settings={"allow_ball_overlap": True, "damping_model": 0}), monkeypatch)
-    assert ref.has("ball_load_20") and len(ref["time"]) == 1 + 1000 // 3
+    assert ref.has("ball_load_20") and len(ref["time"]) == 1 + 1000 // 3 + 1   # and the end, off the stride
 
 
 def test_oil_film_and_substeps(monkeypatch):
@@ -227,3 +227,15 @@ def test_the_poll_between_chunks_stops_the_run_alike():
     assert ref.status == new.status == "failed" and new.message == ref.message
     assert new.meta["failure"] == ref.meta["failure"] and len(ref.data) == 501
     np.testing.assert_array_equal(new.data, ref.data)
+
+
+def test_the_runs_end_is_recorded_off_the_output_stride(monkeypatch):
+    """903 rpm, 0.1 rev at the default 5e-6 s, samples every 1e-5 s: 1329 steps, an odd count. Both loops record
+    the end state (t_end_s) as the last sample, besides every 2nd step, and agree."""
+    ref, _ = _compare(RunConfig(mode="inprocess", rpm=903, revs=0.1, progress=False,
+                                settings={"damping_model": 1, "damping_coefficient": 50}), monkeypatch)
+    n = round(0.1 * 60 / 903 / 5e-6)
+    assert n % 2 == 1 and ref.meta["t_end_s"] == n * 5e-6
+    t = ref["time"]
+    assert t[-1] == ref.meta["t_end_s"] and len(t) == 1 + n // 2 + 1
+    assert np.allclose(np.diff(t[:-1]), 1e-5) and math.isclose(t[-1] - t[-2], 5e-6)

@@ -395,7 +395,8 @@ def test_slider_crank_fmu_with_gauss_seidel_ordering_reproduces_our_master(ssp_a
     """force_lag_steps = 0 and a Gauss-Seidel loop: the two-FMU system is our master's jacobian-drift
     co-simulation, to rounding (the same core, the same BallBearing FMU)."""
     from mechanism.run import run
-    config, system = ssp_config.config_from_ssp(ssp_archive, revs=T_SHORT * 20.0, progress=False)  # 0.04 rev = 2 ms
+    config, system = ssp_config.config_from_ssp(ssp_archive, revs=T_SHORT * 20.0, step=H,   # the pair steps H
+                                                  progress=False)  # 0.04 rev = 2 ms
     try:
         ref = run(replace(config, scheme="jacobian-drift"))   # the default iterates with rollback since issue 12
         pair = _Pair(system.components["mechanism"].fmu, system.components["bearing"].fmu, {"force_lag_steps": 0})

@@ -59,7 +59,8 @@ class CompiledLoop:
     """The arrays of one run for ``compiled_loop.run_steps``, made after ``CouplingLoop.start`` and the first
     ``record``; ``run`` advances a chunk of steps, ``sync`` writes the state back into the Python objects."""
 
-    def __init__(self, loop, rec, y: np.ndarray, every: int):
+    def __init__(self, loop, rec, y: np.ndarray, every: int, last_step: int = 0):
+        """``last_step``: the run's last step, recorded also when it is off the output stride (``every``)."""
         self.loop, self.rec, self.every = loop, rec, every
         settings, scheme, endpoint, link = loop.settings, loop.scheme, loop.endpoint, loop.link
         self.h = settings.step
@@ -107,6 +108,7 @@ class CompiledLoop:
         iset[14] = cl.MODELS.get(scheme.name.replace("-jacobi", ""), 0)
         iset[15] = scheme.ordering == "jacobi"
         iset[16] = scheme.history
+        iset[17] = last_step
         self.past = np.zeros((3, 13))
         for k, x in enumerate(scheme.past):
             self.past[k] = (x.t, x.e_x, x.e_y, x.v_x, x.v_y, x.F_x, x.F_y, x.k_xx, x.k_xy, x.k_yy, x.c_xx,

@@ -54,8 +54,9 @@ N_COUNTS = 11
 N_FSET = 14
 #: int settings (``iset``): max substeps, pass limit, predict, iterative, secant, energy, theta_j, theta_i,
 #: contact law present, constraints (m), end evaluation valid (in/out), component kind (``component_call``),
-#: drift history, entries of past (in/out), force model (``MODELS``), Jacobi ordering, the scheme's history
-N_ISET = 17
+#: drift history, entries of past (in/out), force model (``MODELS``), Jacobi ordering, the scheme's history,
+#: the run's last step (always recorded, also off the output stride)
+N_ISET = 18
 #: force models (iset[14]): the interface-Jacobian ones (``drift_model``, ``trial_model``), ``hold_model``'s
 MODELS = {"jacobian": 0, "zoh": 1, "extrap1": 2, "extrap2": 3}
 
@@ -453,7 +454,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             counts[3] += passes
             counts[4] = max(counts[4], passes)
         y = y_end
-        record = step % every == 0
+        record = step % every == 0 or step == iset[17]
         row = data[counts[8]] if record else no_row
         finish(y, xin[0], xin[1], xf[0], xf[1], I, R, L, LR, W, u, dy, lam, row, probes, scale, t, fset[4], react, p1)
         iset[10] = 1

@@ -602,7 +602,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
         if settings.compiled_loop and getattr(endpoint, "kind", None) in ("in-process", "fmu"):
             from mechanism.cosim import compiled_driver
             if compiled_driver.eligible(loop):
-                compiled = compiled_driver.CompiledLoop(loop, rec, y, every)
+                compiled = compiled_driver.CompiledLoop(loop, rec, y, every, n_steps)
         while compiled is not None and step < n_steps:     # chunks of 500 steps: the bar and the poll between
             last = min(n_steps, (step // 500 + 1) * 500)
             y = compiled.run(step + 1, last, y)
@@ -616,7 +616,8 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
         for step in range(1, n_steps + 1) if compiled is None else ():
             t0 = (step - 1) * h
             t = step * h
-            y = loop.communicate(y, t0, h, step, t, rec if step % every == 0 else None)
+            # a sample every `every` steps, and the run's end also when it is off that stride
+            y = loop.communicate(y, t0, h, step, t, rec if step % every == 0 or step == n_steps else None)
             if step % 500 == 0:
                 bar.update(500)
                 if poll is not None:   # e.g. a signal noted by the driver (mechanism.run), when observe is compiled
