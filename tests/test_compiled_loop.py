@@ -239,3 +239,17 @@ def test_the_runs_end_is_recorded_off_the_output_stride(monkeypatch):
     t = ref["time"]
     assert t[-1] == ref.meta["t_end_s"] and len(t) == 1 + n // 2 + 1
     assert np.allclose(np.diff(t[:-1]), 1e-5) and math.isclose(t[-1] - t[-2], 5e-6)
+
+
+def test_substeps_match_the_masters_for_huge_tangents():
+    """``compiled_loop.substeps`` against ``master.substeps``, also where h * rate / limit is beyond int64 (numba's
+    ceil would give INT64_MIN there: the cap, as Python gives)."""
+    from mechanism.cosim import compiled_loop as cl
+    from mechanism.cosim.coupling import Exchanged
+    from mechanism.cosim.master import substeps
+    rng = np.random.default_rng(3)
+    for k in [0.0, 1e6, 1e8, 3e9, 1e45, *rng.uniform(0, 1e10, 20)]:
+        x = Exchanged(0.0, 0, 0, 0, 0, 0, 0, k, 0.1 * k, 0.5 * k, 50.0, 5.0, 20.0)
+        arr = np.array([x.t, x.e_x, x.e_y, x.v_x, x.v_y, x.F_x, x.F_y, x.k_xx, x.k_xy, x.k_yy, x.c_xx, x.c_xy, x.c_yy])
+        for h in (1e-6, 1e-5, 1e-4, 1e20):
+            assert cl.substeps(h, arr, 3.0, 1.0, 64) == substeps(h, x, 3.0, 1.0, 64), (k, h)

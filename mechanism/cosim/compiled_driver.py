@@ -52,7 +52,8 @@ def eligible(loop) -> bool:
     return bool(getattr(loop.settings, "compiled_loop", False) and loop.kernels and loop._observe_in_kernel
                 and loop.link is not None and component_kind(loop.endpoint) is not None
                 and scheme is not None and scheme.name in SCHEMES
-                and (loop.energy is None or loop.integrals is not None))
+                and (loop.energy is None or loop.integrals is not None)
+                and loop.settings.substep_limit > 0)   # else the Python loop reports the setting's error at its step
 
 
 class CompiledLoop:
@@ -135,7 +136,8 @@ class CompiledLoop:
         (step, time, cause) as the Python loop words them (``master.RunFailure``'s arguments), the objects synced
         and the samples kept."""
         loop, rec = self.loop, self.rec
-        if rec.rows + (last - first + 1) // max(1, self.every) + 1 > len(rec.data):   # never with run_master's capacity
+        every = max(1, self.every)    # rows this chunk may write: its multiples of every, and the run's end
+        if rec.rows + last // every - (first - 1) // every + 1 > len(rec.data):   # never with run_master's capacity
             rec.data = np.vstack([rec.data, np.full_like(rec.data, np.nan)])
         y = cl.run_steps(y, first, last, self.h, self.every, loop._I, loop._R, loop._L, loop._LR, loop._W,
                          loop._u, loop._dy, loop._lam, self.p1, self.acc, self.stages, loop._probes,

@@ -89,7 +89,10 @@ def substeps(h, x, mobility, limit, cap):
     k = max(sym_eig_max(x[7], x[8], x[9]), 0.0)
     c = max(sym_eig_max(x[10], x[11], x[12]), 0.0)
     rate = math.sqrt(k * mobility) + c * mobility
-    return max(1, min(cap, math.ceil(h * rate / limit)))
+    x = h * rate / limit
+    if not x < cap:     # numba's ceil of inf, nan or >= 2**63 is INT64_MIN: cap it first (Python gives cap)
+        return cap
+    return max(1, min(cap, math.ceil(x)))
 
 
 @njit(cache=True)
@@ -347,6 +350,8 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                     sent[i] = xin[i]
                 if not _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, t, fail,
                                  counts):
+                    if iterative:    # no iterative Jacobi scheme today; free the step's state as every exit does
+                        _release(kind, H, state, counts)
                     return y
             if model != 0:
                 hold_model(model, past, npast, fm)
