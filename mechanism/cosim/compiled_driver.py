@@ -19,6 +19,7 @@ from mechanism.cosim import component_kernel as ck
 from mechanism.cosim import fmu_native
 from mechanism.cosim.coupling import Exchanged
 from mechanism.cosim.endpoints import ExchangeError
+from mechanism.cosim.energy import ENERGY_COLUMNS
 from mechanism.cosim.law_kernel import pack_bearing
 
 #: the schemes the compiled loop implements (their force models: ``compiled_loop.drift_model``, ``trial_model``,
@@ -68,8 +69,8 @@ class CompiledLoop:
         self.secant = scheme.ring_speeds == "secant"
         index = rec.index
         self.energy = loop.energy if loop.integrals is not None else None
-        ecols = [index[c] for c in ("contact_energy", "damping_dissipation", "drive_work", "cage_work",
-                                    "applied_work", "energy_residual")] if self.energy is not None else [-1] * 6
+        ecols = ([index[c] for c in ENERGY_COLUMNS] if self.energy is not None
+                 else [-1] * len(ENERGY_COLUMNS))
         scols = loop._sample_cols
         scols = list(range(scols.start, scols.stop)) if isinstance(scols, slice) else [int(c) for c in scols]
         self.cols = np.array([index["omega_inner"], index["omega_outer"], index["kinetic_energy"], *ecols, *scols],
