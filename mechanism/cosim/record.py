@@ -98,17 +98,35 @@ def energy_summary(r: RunResult) -> dict | None:
             "energy_residual_rel_dissipation": float(residual[-1]) / dissipated if dissipated > 0 else None}
 
 
+#: columns splined together by ``resample`` (bounds the spline coefficients held at a time)
+RESAMPLE_GROUP = 4
+
+
 def resample(result: RunResult, times: np.ndarray) -> RunResult:
     """``result`` at other sample times, by a cubic spline through each column (times within its range;
-    ``meta["resampled_from_s"]`` keeps the original sampling interval)."""
-    from scipy.interpolate import CubicSpline
+    ``meta["resampled_from_s"]`` keeps the original sampling interval).
+
+    The spline is scipy's ``CubicSpline`` (not-a-knot) to the bit, computed by ``mechanism.cosim.spline``
+    without importing scipy.interpolate; columns with non-finite values are interpolated linearly."""
+    from mechanism.cosim.spline import NotAKnotSpline
     t = result["time"]
     times = np.asarray(times, float)
     times = times[times <= t[-1] * (1 + 1e-12)]
     data = np.empty((len(times), len(result.columns)))    # filled column by column: no second copy
     data[:, 0] = times
+    finite = []
     for k in range(1, len(result.columns)):
         column = result.data[:, k]
-        data[:, k] = CubicSpline(t, column)(times) if np.all(np.isfinite(column)) else np.interp(times, t, column)
+        if np.all(np.isfinite(column)):
+            finite.append(k)
+        else:
+            data[:, k] = np.interp(times, t, column)
+    for g in range(0, len(finite), RESAMPLE_GROUP):
+        cols = finite[g:g + RESAMPLE_GROUP]
+        spline = NotAKnotSpline(t, result.data[:, cols])
+        if cols == list(range(cols[0], cols[-1] + 1)):   # adjacent columns: evaluated straight into the table
+            spline.evaluate_into(times, data[:, cols[0]:cols[-1] + 1])
+        else:
+            data[:, cols] = spline(times)
     meta = dict(result.meta, resampled_from_s=float(t[1] - t[0]) if len(t) > 1 else 0.0)
     return RunResult(result.columns, data, meta, result.status, result.message)

@@ -13,7 +13,13 @@ import math
 
 import numpy as np
 
-from fmu_bearing.life import LIFE_OUTPUTS, RATING_OUTPUTS, LifeAccumulator, LoadRatings, output_values
+from fmu_bearing.life import (
+    LIFE_OUTPUTS,
+    RATING_OUTPUTS,
+    LifeAccumulator,
+    LoadRatings,
+    output_values,
+)
 from fmu_bearing.parameters import BearingParameters, from_values
 
 #: FMU life output -> summary key (unit in the key, as the other summary figures)
@@ -36,12 +42,16 @@ def life_from_samples(result, params: BearingParameters, t_start: float = -math.
     names = [f"ball_load_{r + 1}" for r in range(int(params.n_balls))]
     if len(t) < 2 or not all(result.has(n) for n in names):
         return acc
-    loads = np.column_stack([result[n] for n in names])
+    # only the samples k whose interval (t_{k-1}, t_k] meets the window add (the times rise): their rows alone
+    # are stacked, not the whole run's ball loads
+    first = max(1, int(np.searchsorted(t, t_start, side="right")))
+    stop = min(len(t), int(np.searchsorted(t, t_end, side="left")) + 1)
+    loads = np.column_stack([result[n][first:stop] for n in names]) if stop > first else np.empty((0, len(names)))
     w_i, w_o = result["omega_inner"], result["omega_outer"]
-    for k in range(1, len(t)):
+    for k in range(first, stop):
         lo, hi = max(t[k - 1], t_start), min(t[k], t_end)
-        if hi > lo and np.all(np.isfinite(loads[k])):
-            acc.add(loads[k].tolist(), float(w_i[k]), float(w_o[k]), float(hi - lo))
+        if hi > lo and np.all(np.isfinite(loads[k - first])):
+            acc.add(loads[k - first].tolist(), float(w_i[k]), float(w_o[k]), float(hi - lo))
     return acc
 
 

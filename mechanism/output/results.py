@@ -11,6 +11,7 @@ import csv
 import json
 import math
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -21,39 +22,57 @@ from .figures import FIGURES
 from .life import run_life
 
 
-def _figures(r: RunResult, mask: np.ndarray) -> dict:
+def _figures(r: RunResult, rows: slice) -> dict:
+    """Peak figures of the samples ``rows`` (a slice: the columns are views, not copies)."""
     def peak(values):
         return float(np.nanmax(values)) if values.size else math.nan
 
+    def column(name):
+        return r[name][rows]
+
+    some = column("time").size > 0
     out = {
-        "max_eccentricity_m": peak(np.hypot(r["e_x"][mask], r["e_y"][mask])),
-        "peak_joint_force_N": peak(np.hypot(r["F_x"][mask], r["F_y"][mask])),
-        "slider_acceleration_min_m_s2": float(np.nanmin(r["slider_a"][mask])) if mask.any() else math.nan,
-        "slider_acceleration_max_m_s2": peak(r["slider_a"][mask]),
-        "crank_moment_min_N_m": float(np.nanmin(r["crank_moment"][mask])) if mask.any() else math.nan,
-        "crank_moment_max_N_m": peak(r["crank_moment"][mask]),
-        "max_constraint_violation_m": peak(np.abs(r["constraint_violation"][mask])),
+        "max_eccentricity_m": peak(np.hypot(column("e_x"), column("e_y"))),
+        "peak_joint_force_N": peak(np.hypot(column("F_x"), column("F_y"))),
+        "slider_acceleration_min_m_s2": float(np.nanmin(column("slider_a"))) if some else math.nan,
+        "slider_acceleration_max_m_s2": peak(column("slider_a")),
+        "crank_moment_min_N_m": float(np.nanmin(column("crank_moment"))) if some else math.nan,
+        "crank_moment_max_N_m": peak(column("crank_moment")),
+        "max_constraint_violation_m": peak(np.abs(column("constraint_violation"))),
     }
-    loads = r.ball_load_columns
-    out["max_ball_load_N"] = peak(np.column_stack([r[c][mask] for c in loads])) if loads else None
+    loads = r.ball_load_columns   # the peak over all balls: the largest of each ball's peak (no stacked copy)
+    out["max_ball_load_N"] = _peak_of_columns([column(c) for c in loads]) if loads else None
     return out
+
+
+def _peak_of_columns(columns: list[np.ndarray]) -> float:
+    """``np.nanmax`` of the columns side by side, without stacking them (the largest of each column's peak;
+    NaN, with numpy's warning, only if every value is NaN)."""
+    if not columns[0].size:
+        return math.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)   # an all-NaN column: warned below if all are
+        peaks = np.array([np.nanmax(c) for c in columns])
+    return float(np.nanmax(peaks))
 
 
 def summary(r: RunResult) -> dict:
     """Peak figures of the whole run and of the second crank revolution alone (key ``rev2``)."""
     t = r["time"]
     period = r.meta.get("crank_period_s")
-    result = {"status": r.status, "message": r.message, "meta": r.meta, "samples": int(len(t))}
+    result = {"status": r.status, "message": r.message, "meta": r.meta, "samples": len(t)}
     if len(t) == 0:
         return result
-    result["all"] = _figures(r, np.ones_like(t, dtype=bool))
+    result["all"] = _figures(r, slice(None))
     energy = energy_summary(r)
     if energy is not None:
         result["energy"] = energy
     result["life"] = run_life(r)     # bearing rating life (docs/bearing-life.md); None for other joints
     half = 0.5 * float(r.meta.get("output_interval_s") or 0.0) + 1e-12   # the step count is rounded
     if period and t[-1] >= 2 * period - half:
-        rev2 = (t >= period - half) & (t <= 2 * period + half)
+        # the samples with period - half <= t <= 2 period + half (the times rise): a slice, so views
+        rev2 = slice(int(np.searchsorted(t, period - half, side="left")),
+                     int(np.searchsorted(t, 2 * period + half, side="right")))
         result["rev2"] = _figures(r, rev2)
         result["rev2"]["life"] = run_life(r, (period, 2 * period))
     return result

@@ -1,0 +1,126 @@
+"""Peak memory of ``python -m mechanism run`` (issue 11: a 20-revolution run under 200 MB peak).
+
+    python benchmarks/memory.py [--revs 2 20] [--root CHECKOUT] [--fmu dist/BallBearing.fmu] [--plots]
+                                [--phases N] [-- EXTRA RUN ARGUMENTS]
+
+Each run is a fresh ``python -m mechanism run --revs N --quiet --no-plots`` (``--plots``: with the plots) in a
+subprocess of the checkout ``--root`` (default this one; e.g. a worktree of the commit before, to measure
+before/after in one go); its peak resident set size is the child's ``ru_maxrss`` (``os.wait4``: that child
+and its own children, as ``/usr/bin/time -v`` reports it). Printed per run: the peak, the recorded data
+(timeseries.csv and ideal_timeseries.csv as float64 tables: rows x columns x 8 bytes) and the peak less the
+data; then the growth per revolution between the first and the last run (the data's own growth beside it).
+
+``--phases N`` instead runs one N-revolution run's steps (as ``mechanism.cli.cmd_run``) in a child that prints
+its resident set size and its peak within each phase (imports, the run, the ideal counterpart, the summary,
+the CSV files; ``/proc/self/status`` VmRSS and VmHWM, the peak reset between phases through
+``/proc/self/clear_refs``): where the peak is.
+
+The first run of a checkout compiles the numba kernels into its cache: run it once before measuring.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+PHASES = r'''
+import sys, time
+from pathlib import Path
+
+def mark(name, _state={}):
+    status = dict(line.split(":", 1) for line in open("/proc/self/status"))
+    mb = lambda key: int(status[key].split()[0]) / 1024
+    print(f"  {name:34s} RSS {mb('VmRSS'):7.1f} MB   peak within the phase {mb('VmHWM'):7.1f} MB", flush=True)
+    try:
+        with open("/proc/self/clear_refs", "w") as f:   # reset VmHWM to the current RSS
+            f.write("5")
+    except OSError:
+        pass
+
+mark("interpreter")
+from mechanism.output.results import summary, write_csv, write_json
+from mechanism.run import RunConfig, run
+import mechanism.cli as cli
+mark("imports")
+config = RunConfig(revs=float(sys.argv[1]), progress=False, fmu=sys.argv[3] or None)
+result = run(config)
+mark("run (kernels, FMU, samples)")
+ideal = cli.ideal_counterpart(config, result, None)
+mark("ideal counterpart (run, resample)")
+figures = summary(result)
+figures["ideal"] = summary(ideal)
+mark("summaries")
+out = Path(sys.argv[2])
+write_csv(result, out / "timeseries.csv")
+mark("timeseries.csv")
+write_csv(ideal, out / "ideal_timeseries.csv")
+mark("ideal_timeseries.csv")
+print("  modules: scipy.interpolate", "scipy.interpolate" in sys.modules, "| matplotlib", "matplotlib" in sys.modules,
+      "| pandas", "pandas" in sys.modules)
+'''
+
+
+def child_env(root: Path) -> dict:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(root) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    return env
+
+
+def peak_of(argv: list[str], root: Path) -> tuple[float, int]:
+    """(peak RSS [MB], exit status) of the command ``argv`` run in ``root``."""
+    proc = subprocess.Popen(argv, cwd=root, env=child_env(root), stdout=subprocess.DEVNULL)
+    _, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    return usage.ru_maxrss / 1024, proc.returncode
+
+
+def table_mb(path: Path) -> float:
+    """A CSV written by ``write_csv`` as a float64 table [MB] (rows x columns x 8 bytes)."""
+    if not path.exists():
+        return 0.0
+    with open(path, "rb") as f:
+        columns = f.readline().count(b",") + 1
+        rows = sum(1 for _ in f)
+    return rows * columns * 8 / 2**20
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--revs", type=float, nargs="+", default=[2.0, 20.0])
+    parser.add_argument("--root", type=Path, default=ROOT, help="the checkout to run (default this one)")
+    parser.add_argument("--fmu", default="", help="the component FMU (default: the checkout's dist/)")
+    parser.add_argument("--plots", action="store_true", help="with the plots (default --no-plots)")
+    parser.add_argument("--phases", type=float, default=None, metavar="N",
+                        help="the phases of one N-revolution run instead")
+    parser.add_argument("extra", nargs="*", help="more arguments for `run` (after --)")
+    args = parser.parse_args(argv)
+    root = args.root.resolve()
+    with tempfile.TemporaryDirectory(prefix="memory-") as tmp:
+        if args.phases is not None:
+            print(f"phases of a {args.phases:g}-revolution run ({root}):")
+            return subprocess.call([sys.executable, "-c", PHASES, str(args.phases), tmp, args.fmu],
+                                   cwd=root, env=child_env(root))
+        peaks = []
+        for revs in args.revs:
+            out = Path(tmp) / f"r{revs:g}"
+            cmd = [sys.executable, "-m", "mechanism", "run", "--revs", f"{revs:g}", "--quiet", "--out", str(out)]
+            cmd += ([] if args.plots else ["--no-plots"]) + (["--fmu", args.fmu] if args.fmu else []) + args.extra
+            peak, status = peak_of(cmd, root)
+            data = table_mb(out / "timeseries.csv") + table_mb(out / "ideal_timeseries.csv")
+            peaks.append((revs, peak, data))
+            print(f"{revs:6g} revolutions: peak RSS {peak:7.1f} MB, data {data:6.1f} MB, peak less data "
+                  f"{peak - data:7.1f} MB" + (f"  (exit status {status})" if status else ""), flush=True)
+        if len(peaks) > 1 and peaks[-1][0] != peaks[0][0]:
+            (r0, p0, d0), (r1, p1, d1) = peaks[0], peaks[-1]
+            print(f"growth per revolution ({r0:g} -> {r1:g}): {(p1 - p0) / (r1 - r0):.2f} MB "
+                  f"(the data's own: {(d1 - d0) / (r1 - r0):.2f} MB)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

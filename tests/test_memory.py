@@ -1,0 +1,153 @@
+"""A run's memory (issue 11): the resampling spline without scipy.interpolate is scipy's CubicSpline to the bit,
+the summary's peaks without stacked copies are the stacked peaks, the life of a window accumulated over the
+window's samples alone is the whole loop's, and a --no-plots run does not import scipy.interpolate.
+
+Peak memory itself is measured in benchmarks/memory.py, not here."""
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+from scipy.interpolate import CubicSpline
+
+from fmu_bearing.life import LifeAccumulator, LoadRatings, output_values
+from fmu_bearing.parameters import BearingParameters
+from mechanism.cosim.record import RunResult, resample
+from mechanism.cosim.spline import NotAKnotSpline
+from mechanism.output.life import life_from_samples
+from mechanism.output.results import _figures, _peak_of_columns
+
+ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
+
+
+def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal to the bit (signed zeros and NaN payloads included)."""
+    a, b = np.ascontiguousarray(a, float), np.ascontiguousarray(b, float)
+    return a.shape == b.shape and np.array_equal(a.view(np.int64), b.view(np.int64))
+
+
+def _knots(rng, n: int, kind: str) -> np.ndarray:
+    if kind == "uniform":                  # a run's sample times: k * h
+        return np.arange(n) * 1e-4
+    if kind == "random":
+        return np.cumsum(rng.uniform(0.01, 1.0, n))
+    return np.cumsum(rng.choice([1e-3, 1.0, 50.0], n))   # wild spacing: dgtsv's row interchanges
+
+
+@pytest.mark.parametrize("kind", ["uniform", "random", "wild"])
+def test_spline_is_scipys_cubic_spline_to_the_bit(kind):
+    rng = np.random.default_rng({"uniform": 1, "random": 2, "wild": 3}[kind])
+    for _ in range(40):
+        n = int(rng.integers(2, 300))
+        x = _knots(rng, n, kind)
+        y = rng.normal(size=(n, 3)) * 10.0 ** rng.integers(-9, 9)
+        y[:, 1] = np.where(rng.random(n) < 0.3, 0.0, y[:, 1])       # zeros of both signs
+        y[::3, 2] = -0.0
+        # the knots themselves, points between them, and a run's last time just past the last knot
+        x_new = np.sort(np.concatenate([x, rng.uniform(x[0], x[-1], 3 * n), [x[-1] * (1 + 1e-12)]]))
+        assert same_bits(NotAKnotSpline(x, y)(x_new), CubicSpline(x, y)(x_new)), n
+        assert same_bits(NotAKnotSpline(x, y[:, 0])(x_new), CubicSpline(x, y[:, 0])(x_new)), n
+
+
+def test_spline_refuses_knots_that_do_not_rise():
+    with pytest.raises(ValueError, match="strictly increasing"):
+        NotAKnotSpline(np.array([0.0, 1.0, 1.0, 2.0]), np.zeros(4))
+    with pytest.raises(ValueError, match="strictly increasing"):
+        NotAKnotSpline(np.array([0.0]), np.zeros(1))
+
+
+def test_resample_is_a_cubic_spline_per_column_and_linear_where_not_finite():
+    """The reference is scipy's CubicSpline column by column (``resample`` before issue 11)."""
+    rng = np.random.default_rng(4)
+    t = np.arange(1001) * 1e-4
+    columns = ["time"] + [f"c{k}" for k in range(9)]
+    data = np.column_stack([t] + [np.sin(rng.uniform(1, 300) * t + rng.uniform(0, 6)) * rng.uniform(1e-6, 1e3)
+                                  for _ in range(9)])
+    data[17, 3] = np.nan                       # a column with a gap: linear
+    data[:, 6] = np.nan                        # a column never recorded
+    times = np.arange(10001) * 1e-5
+    got = resample(RunResult(columns, data, {"a": 1}), times)
+    assert got.columns == columns and got.meta["resampled_from_s"] == t[1] - t[0] and got.meta["a"] == 1
+    assert same_bits(got["time"], times)
+    for k in range(1, len(columns)):
+        column = data[:, k]
+        want = CubicSpline(t, column)(times) if np.all(np.isfinite(column)) else np.interp(times, t, column)
+        assert same_bits(got.data[:, k], want), columns[k]
+
+
+def test_peaks_without_stacking_are_the_stacked_peaks():
+    rng = np.random.default_rng(5)
+    a, b, c = rng.normal(size=(3, 50))
+    a[::4] = np.nan
+    assert _peak_of_columns([a, b, c]) == float(np.nanmax(np.column_stack([a, b, c])))
+    nan = np.full(50, np.nan)
+    assert _peak_of_columns([nan, b]) == float(np.nanmax(np.column_stack([nan, b])))
+    with pytest.warns(RuntimeWarning):
+        assert math.isnan(_peak_of_columns([nan, nan]))
+    assert math.isnan(_peak_of_columns([a[:0], b[:0]]))
+
+
+def test_figures_of_a_slice_are_the_figures_of_a_mask():
+    """``_figures`` on rows given as a slice (views) against the same figures from boolean-mask copies."""
+    rng = np.random.default_rng(6)
+    columns = ["time", "e_x", "e_y", "F_x", "F_y", "slider_a", "crank_moment", "constraint_violation",
+               "ball_load_1", "ball_load_2"]
+    data = rng.normal(size=(200, len(columns)))
+    data[:, 0] = np.arange(200) * 1e-3
+    data[5, 8] = np.nan
+    r = RunResult(columns, data)
+    for rows in (slice(None), slice(40, 120), slice(0, 0)):
+        mask = np.zeros(200, bool)
+        mask[rows] = True
+        got = _figures(r, rows)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            want = {
+                "max_eccentricity_m": np.hypot(r["e_x"][mask], r["e_y"][mask]),
+                "peak_joint_force_N": np.hypot(r["F_x"][mask], r["F_y"][mask]),
+                "slider_acceleration_max_m_s2": r["slider_a"][mask],
+                "crank_moment_max_N_m": r["crank_moment"][mask],
+                "max_constraint_violation_m": np.abs(r["constraint_violation"][mask]),
+                "max_ball_load_N": np.column_stack([r["ball_load_1"][mask], r["ball_load_2"][mask]]),
+            }
+        for key, values in want.items():
+            expect = float(np.nanmax(values)) if values.size else math.nan
+            assert got[key] == expect or (math.isnan(got[key]) and math.isnan(expect)), key
+        if mask.any():
+            assert got["slider_acceleration_min_m_s2"] == float(np.nanmin(r["slider_a"][mask]))
+            assert got["crank_moment_min_N_m"] == float(np.nanmin(r["crank_moment"][mask]))
+
+
+def test_life_of_a_window_is_the_loop_over_every_sample():
+    """The window's samples alone give the accumulator of the loop over every sample (the form before)."""
+    params = BearingParameters()
+    n_balls = int(params.n_balls)
+    rng = np.random.default_rng(7)
+    t = np.arange(400) * 2.5e-4
+    loads = rng.uniform(0.0, 300.0, size=(400, n_balls))
+    loads[100, 2] = np.nan                                        # a sample skipped
+    w_i, w_o = rng.uniform(100, 130, 400), np.zeros(400)
+    columns = ["time", "omega_inner", "omega_outer"] + [f"ball_load_{k + 1}" for k in range(n_balls)]
+    r = RunResult(columns, np.column_stack([t, w_i, w_o, loads]))
+    for window in ((-math.inf, math.inf), (0.0125, 0.05), (0.01255, 0.0501), (0.2, 0.3), (0.05, 0.05)):
+        acc = LifeAccumulator(LoadRatings.of_bearing(params), params.reliability_factor)
+        for k in range(1, len(t)):
+            lo, hi = max(t[k - 1], window[0]), min(t[k], window[1])
+            if hi > lo and np.all(np.isfinite(loads[k])):
+                acc.add(loads[k].tolist(), float(w_i[k]), float(w_o[k]), float(hi - lo))
+        got = life_from_samples(r, params, *window)
+        assert output_values(got) == output_values(acc) and got.speed == acc.speed, window
+
+
+def test_a_run_without_plots_does_not_import_scipy_interpolate(tmp_path):
+    """The ideal counterpart is resampled (1e-4 s -> 1e-5 s) without scipy.interpolate's ~22 MB."""
+    code = ("import sys; from mechanism.cli import main; "
+            f"rc = main(['run', '--revs', '0.1', '--mode', 'inprocess', '--quiet', '--no-plots', '--out', {str(tmp_path)!r}]); "
+            "print(rc, 'scipy.interpolate' in sys.modules, 'matplotlib' in sys.modules)")
+    proc = subprocess.run([sys.executable, "-c", code], check=False, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert proc.stdout.split()[-3:] == ["0", "False", "False"], proc.stdout + proc.stderr
+    assert (tmp_path / "ideal_timeseries.csv").exists()
