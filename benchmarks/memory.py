@@ -10,10 +10,11 @@ and its own children, as ``/usr/bin/time -v`` reports it). Printed per run: the 
 (timeseries.csv and ideal_timeseries.csv as float64 tables: rows x columns x 8 bytes) and the peak less the
 data; then the growth per revolution between the first and the last run (the data's own growth beside it).
 
-``--phases N`` instead runs one N-revolution run's steps (as ``mechanism.cli.cmd_run``) in a child that prints
-its resident set size and its peak within each phase (imports, the run, the ideal counterpart, the summary,
-the CSV files; ``/proc/self/status`` VmRSS and VmHWM, the peak reset between phases through
-``/proc/self/clear_refs``): where the peak is.
+``--phases N`` instead runs one N-revolution command (``mechanism.cli.main``) in a child that prints its resident
+set size and its peak within each phase (imports, the run, the ideal counterpart's run and resample, the summary
+and the CSV files: ``/proc/self/status`` VmRSS and VmHWM after each of these functions returns, the peak reset
+through ``/proc/self/clear_refs``): where the peak is. With ``--root`` an older checkout, the phases its
+functions have.
 
 The first run of a checkout compiles the numba kernels into its cache: run it once before measuring.
 """
@@ -29,13 +30,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 PHASES = r'''
-import sys, time
-from pathlib import Path
+import sys
 
-def mark(name, _state={}):
+def mark(name):
     status = dict(line.split(":", 1) for line in open("/proc/self/status"))
     mb = lambda key: int(status[key].split()[0]) / 1024
-    print(f"  {name:34s} RSS {mb('VmRSS'):7.1f} MB   peak within the phase {mb('VmHWM'):7.1f} MB", flush=True)
+    print(f"  {name:40s} RSS {mb('VmRSS'):7.1f} MB   peak within the phase {mb('VmHWM'):7.1f} MB", flush=True)
     try:
         with open("/proc/self/clear_refs", "w") as f:   # reset VmHWM to the current RSS
             f.write("5")
@@ -43,25 +43,28 @@ def mark(name, _state={}):
         pass
 
 mark("interpreter")
-from mechanism.output.results import summary, write_csv, write_json
-from mechanism.run import RunConfig, run
 import mechanism.cli as cli
+import mechanism.output.results as results
+import mechanism.run as runs
 mark("imports")
-config = RunConfig(revs=float(sys.argv[1]), progress=False, fmu=sys.argv[3] or None)
-result = run(config)
-mark("run (kernels, FMU, samples)")
-ideal = cli.ideal_counterpart(config, result, None)
-mark("ideal counterpart (run, resample)")
-figures = summary(result)
-figures["ideal"] = summary(ideal)
-mark("summaries")
-out = Path(sys.argv[2])
-write_csv(result, out / "timeseries.csv")
-mark("timeseries.csv")
-write_csv(ideal, out / "ideal_timeseries.csv")
-mark("ideal_timeseries.csv")
+
+def marked(module, name, label):
+    function = getattr(module, name)
+    def wrapper(*args, **kwargs):
+        value = function(*args, **kwargs)
+        mark(label(args) if callable(label) else label)
+        return value
+    setattr(module, name, wrapper)
+
+marked(runs, "run", lambda a: f"run ({a[0].joint}: kernels, component, samples)")
+marked(cli, "ideal_counterpart", "ideal counterpart's resample")
+marked(results, "write_run_table", "summary, timeseries.csv")
+marked(results, "compared_columns", "the run's table let go")
+marked(results, "write_ideal_tables", "ideal_timeseries.csv, summary.json")
+marked(results, "write_outputs", "write_outputs (CSV files, summary.json)")
+rc = cli.main(["run", "--revs", sys.argv[1], "--quiet", "--out", sys.argv[2]] + sys.argv[3:])
 print("  modules: scipy.interpolate", "scipy.interpolate" in sys.modules, "| matplotlib", "matplotlib" in sys.modules,
-      "| pandas", "pandas" in sys.modules)
+      "| pandas", "pandas" in sys.modules, "| exit status", rc)
 '''
 
 
@@ -103,7 +106,8 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="memory-") as tmp:
         if args.phases is not None:
             print(f"phases of a {args.phases:g}-revolution run ({root}):")
-            return subprocess.call([sys.executable, "-c", PHASES, str(args.phases), tmp, args.fmu],
+            extra = ([] if args.plots else ["--no-plots"]) + (["--fmu", args.fmu] if args.fmu else []) + args.extra
+            return subprocess.call([sys.executable, "-c", PHASES, f"{args.phases:g}", tmp, *extra],
                                    cwd=root, env=child_env(root))
         peaks = []
         for revs in args.revs:

@@ -67,7 +67,7 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def config_from_args(args) -> "RunConfig":
+def config_from_args(args) -> RunConfig:
     from mechanism.run import RunConfig
     return RunConfig(rpm=args.rpm, revs=args.revs, balls=args.balls, joint=args.joint, mode=args.mode,
                      step=args.step, output_interval=args.output_interval, settings=dict(args.settings),
@@ -97,7 +97,13 @@ PHASES: dict[str, float] = {}
 
 def cmd_run(args) -> int:
     start = time.perf_counter()
-    from mechanism.output.results import output_lock, write_outputs
+    from mechanism.output.results import (
+        compared_columns,
+        output_lock,
+        write_ideal_tables,
+        write_outputs,
+        write_run_table,
+    )
     from mechanism.run import interrupted, run, stop_on_signals
     from mechanism.ssp.config import config_from_ssp_args
     out = Path(args.out)
@@ -109,15 +115,29 @@ def cmd_run(args) -> int:
         result = run(config)
         marks.append(time.perf_counter())
         stopped = interrupted()
+        wants_ideal = not stopped and config.joint != "ideal" and not args.no_ideal
+        early = None     # without plots, the run's table is written and let go before the ideal runs (issue 11)
+        if wants_ideal and args.no_plots:
+            with stop_on_signals():   # a signal while writing waits until the file is complete (then no ideal)
+                early = write_run_table(result, out)
+            stopped = interrupted()
+            result = compared_columns(result)   # what summary.json compares with the ideal; the rest is freed
+        written = time.perf_counter() - marks[-1]
         ideal = None
-        if not stopped and config.joint != "ideal" and not args.no_ideal:
+        if wants_ideal and not stopped:
             ideal = ideal_counterpart(config, result, workers)
             stopped = interrupted()
         marks.append(time.perf_counter())
         with stop_on_signals():   # a signal while writing waits until the files are complete
-            figures = write_outputs(result, out, ideal, plots=not args.no_plots and not stopped, workers=workers)
+            if early is not None:
+                figures = dict(write_ideal_tables(early, result, out, ideal), plots=[])
+            else:
+                figures = write_outputs(result, out, ideal, plots=not args.no_plots and not stopped,
+                                        workers=workers)
         marks.append(time.perf_counter())
     PHASES.update(zip(("imports", "run", "ideal", "outputs"), (b - a for a, b in itertools.pairwise(marks))))
+    PHASES["ideal"] -= written      # the run's table written before the ideal ran counts as output
+    PHASES["outputs"] += written
     files = "timeseries.csv" + (", ideal_timeseries.csv" if ideal is not None else "") + ", summary.json"
     print(f"wrote {out}/{files}" + (f" and {len(figures['plots'])} plots" if figures["plots"] else ""))
     label, part = ("second revolution", figures["rev2"]) if "rev2" in figures else ("whole run", figures.get("all"))
@@ -151,7 +171,7 @@ def output_workers(plots: bool):
         yield started
 
 
-def ideal_counterpart(config: "RunConfig", result, workers=None):
+def ideal_counterpart(config: RunConfig, result, workers=None):
     """The ideal joint's run for comparison, at the cheapest step that keeps its documented agreement
     (``IDEAL_STEP``: RK4 at 1e-4 s matches 1e-5 s to < 1e-9, mechanism.studies.reproduce.cases), resampled
     by cubic splines onto the bearing run's sample times when those are finer (error < 1e-9 relative

@@ -112,8 +112,10 @@ def output_lock(out: Path):
         os.close(fd)
 
 
-#: rows formatted and written at a time by ``write_csv``
-CSV_CHUNK_ROWS = 2000
+#: rows formatted and written at a time by ``write_csv``: a chunk's text (~100 kB at 33 columns) stays below
+#: glibc's mmap threshold, so the heap does not keep megabytes of freed chunks resident (issue 11: 2,000 rows
+#: kept ~5 MB of a 20-revolution run's peak)
+CSV_CHUNK_ROWS = 256
 
 
 def write_csv(r: RunResult, path: Path) -> None:
@@ -196,17 +198,38 @@ def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, 
 
 def _write_tables(result: RunResult, out: Path, ideal: RunResult | None) -> dict:
     """``write_outputs``'s CSV files and summary.json; returns the summary's figures."""
+    return write_ideal_tables(write_run_table(result, out), result, out, ideal)
+
+
+def write_run_table(result: RunResult, out: Path) -> dict:
+    """The first half of ``write_outputs`` without plots: the run's summary figures and timeseries.csv (the
+    run's table can then be let go, ``compared_columns`` kept, before the ideal counterpart runs: issue 11).
+    If the CSV cannot be written, summary.json still is, with ``write_error``, and the OSError is raised."""
     figures = summary(result)
-    try:
-        write_csv(result, out / "timeseries.csv")
-        if ideal is not None:
-            write_csv(ideal, out / "ideal_timeseries.csv")
-    except OSError as err:  # e.g. a full disk: keep at least the (small) summary, then report
-        figures["write_error"] = f"{err.strerror or err} writing {err.filename or out}"
-        with contextlib.suppress(OSError):
-            write_json(figures, out / "summary.json")
-        raise
+    _write_csv_or_report(result, out / "timeseries.csv", figures, out)
+    return figures
+
+
+#: the run's columns compared with the ideal counterpart's in summary.json (``write_ideal_tables``)
+COMPARED = ("time", "slider_a", "slider_x")
+
+
+def compared_columns(result: RunResult) -> RunResult:
+    """``result`` reduced to the columns ``write_ideal_tables`` compares (``COMPARED``; a view when it already is)."""
+    if tuple(result.columns) == COMPARED:
+        return result
+    names = [c for c in COMPARED if result.has(c)]
+    data = np.empty((len(result.data), len(names)))
+    for k, name in enumerate(names):
+        data[:, k] = result[name]
+    return RunResult(names, data, result.meta, result.status, result.message)
+
+
+def write_ideal_tables(figures: dict, result: RunResult, out: Path, ideal: RunResult | None) -> dict:
+    """The second half: ideal_timeseries.csv, the ideal's figures and its deviation from the run (``result``:
+    at least ``COMPARED``), then summary.json; returns ``figures`` completed."""
     if ideal is not None:
+        _write_csv_or_report(ideal, out / "ideal_timeseries.csv", figures, out)
         figures["ideal"] = summary(ideal)
         if len(result["time"]) and len(ideal["time"]) >= len(result["time"]):
             k = len(result["time"])
@@ -215,3 +238,15 @@ def _write_tables(result: RunResult, out: Path, ideal: RunResult | None) -> dict
             figures["max_slider_position_error_m"] = float(np.max(np.abs(result["slider_x"] - ideal["slider_x"][:k])))
     write_json(figures, out / "summary.json")
     return figures
+
+
+def _write_csv_or_report(r: RunResult, path: Path, figures: dict, out: Path) -> None:
+    """``write_csv``; on an OSError (a full disk) summary.json with ``write_error`` (the small summary at least
+    is kept), then the error is raised."""
+    try:
+        write_csv(r, path)
+    except OSError as err:
+        figures["write_error"] = f"{err.strerror or err} writing {err.filename or out}"
+        with contextlib.suppress(OSError):
+            write_json(figures, out / "summary.json")
+        raise
