@@ -53,6 +53,13 @@ def test_spline_is_scipys_cubic_spline_to_the_bit(kind):
         assert same_bits(NotAKnotSpline(x, y[:, 0])(x_new), CubicSpline(x, y[:, 0])(x_new)), n
 
 
+def test_spline_of_fewer_than_four_knots_is_scipys():
+    x, y = np.array([0.0, 0.4, 1.0]), np.array([[1.0, -2.0], [3.0, 0.5], [2.0, 7.0]])
+    x_new = np.linspace(0.0, 1.0, 11)
+    for n in (2, 3):
+        assert same_bits(NotAKnotSpline(x[:n], y[:n])(x_new), CubicSpline(x[:n], y[:n])(x_new))
+
+
 def test_spline_refuses_knots_that_do_not_rise():
     with pytest.raises(ValueError, match="strictly increasing"):
         NotAKnotSpline(np.array([0.0, 1.0, 1.0, 2.0]), np.zeros(4))
@@ -151,3 +158,18 @@ def test_a_run_without_plots_does_not_import_scipy_interpolate(tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], check=False, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert proc.stdout.split()[-3:] == ["0", "False", "False"], proc.stdout + proc.stderr
     assert (tmp_path / "ideal_timeseries.csv").exists()
+
+
+def test_the_command_without_plots_writes_what_write_outputs_writes(tmp_path):
+    """``run --no-plots`` writes the run's table and lets it go before the ideal counterpart runs: the files are
+    the bytes ``write_outputs`` writes from the run and its ideal counterpart held together."""
+    from mechanism.cli import ideal_counterpart, main
+    from mechanism.output.results import write_outputs
+    from mechanism.run import RunConfig, run
+    assert main(["run", "--revs", "0.2", "--mode", "inprocess", "--quiet", "--no-plots",
+                 "--out", str(tmp_path / "cli")]) == 0
+    config = RunConfig(revs=0.2, mode="inprocess", progress=False)
+    result = run(config)
+    write_outputs(result, tmp_path / "held", ideal_counterpart(config, result), plots=False)
+    for name in ("timeseries.csv", "ideal_timeseries.csv", "summary.json"):
+        assert (tmp_path / "cli" / name).read_bytes() == (tmp_path / "held" / name).read_bytes(), name
