@@ -51,7 +51,7 @@ import sys
 
 def mark(name):
     status = dict(line.split(":", 1) for line in open("/proc/self/status"))
-    mb = lambda key: int(status[key].split()[0]) / 1024
+    mb = lambda key: int(status[key].split()[0]) / 1000
     print(f"  {name:40s} RSS {mb('VmRSS'):7.1f} MB   peak within the phase {mb('VmHWM'):7.1f} MB", flush=True)
     try:
         with open("/proc/self/clear_refs", "w") as f:   # reset VmHWM to the current RSS
@@ -94,11 +94,12 @@ def child_env(root: Path) -> dict:
 
 
 def peak_of(argv: list[str], root: Path) -> tuple[float, int]:
-    """(peak RSS [MB], exit status) of the command ``argv`` run in ``root``."""
+    """(peak RSS [MB], exit status) of the command ``argv`` run in ``root`` (MB: 1000 kB, as the kbytes of
+    ``/usr/bin/time -v`` are quoted in issue 11)."""
     proc = subprocess.Popen(argv, cwd=root, env=child_env(root), stdout=subprocess.DEVNULL)
     _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
-    return usage.ru_maxrss / 1024, proc.returncode
+    return usage.ru_maxrss / 1000, proc.returncode
 
 
 def table_mb(path: Path) -> float:
@@ -108,7 +109,7 @@ def table_mb(path: Path) -> float:
     with open(path, "rb") as f:
         columns = f.readline().count(b",") + 1
         rows = sum(1 for _ in f)
-    return rows * columns * 8 / 2**20
+    return rows * columns * 8 / 1e6
 
 
 def main(argv: list[str] | None = None) -> int:
