@@ -18,22 +18,23 @@ functions have.
 
 The first run of a checkout compiles the numba kernels into its cache: run it once before measuring.
 
-Measured (2 shared cores, 04:00 UTC, ``python benchmarks/memory.py`` here and with ``--root`` a worktree of
-a1e65ab and ``--fmu`` this checkout's dist/BallBearing.fmu; default step 5e-6 s, output every 1e-5 s):
+Measured (2 shared cores, 04:05 UTC, ``python benchmarks/memory.py`` here and with ``--root`` a worktree of
+a1e65ab and ``--fmu`` this checkout's dist/BallBearing.fmu; default step 5e-6 s, output every 1e-5 s; MB = 1000 kB):
 
                           before (a1e65ab)   after
-    2 revolutions             211.4 MB      182.8 MB
-    20 revolutions            252.3 MB      206.3 MB
-    growth per revolution      2.27 MB       1.30 MB   (the recorded data's own: 1.87 MB, the run's table 1.32)
+    2 revolutions             216.5 MB      186.9 MB
+    20 revolutions            258.2 MB      211.0 MB   (/usr/bin/time -v: 258,240 and 211,048 kbytes)
+    growth per revolution      2.32 MB       1.34 MB   (the recorded data's own: 1.96 MB, the run's table 1.38)
 
 Where it went (``--phases 20``, before -> after): scipy.interpolate is no longer imported for the ideal
-counterpart's resampling (``mechanism.cosim.spline``, scipy's CubicSpline to the bit: 22 MB); without plots the
-run's table is written and let go before the ideal counterpart runs, so the two tables (26.4 and 12.8 MB) are
-never held together; the summary takes its peaks over views (the stacked ball loads and the window's life were
-~11 MB of temporaries); CSV chunks of 256 rows (2,000 rows left ~5 MB of freed heap resident). What is left of
-a 20-revolution run's 206 MB: interpreter, numpy and the project's modules 33 MB, numba 59 MB, the compiled
-kernels ~67 MB, the FMU ~10 MB, the run's table 26.4 MB (1.32 MB per revolution) and a few MB of writing.
-With ``--plots`` the peak is 292 MB before and after (the tables pickled to the output workers).
+counterpart's resampling (``mechanism.cosim.spline``, scipy's CubicSpline to the bit: ~23 MB); without plots
+the run's table is written and let go before the ideal counterpart runs, so the two tables (27.7 and 13.4 MB)
+are never held together; the summary takes its peaks over views (the stacked ball loads and the window's life
+were ~11 MB of temporaries); CSV chunks of 256 rows (2,000 rows left ~5 MB of freed heap resident). What is
+left of a 20-revolution run's 211 MB: interpreter, numpy and the project's modules 35 MB, numba 62 MB, the
+compiled kernels ~70 MB, the FMU ~6-10 MB, the run's table 27.7 MB (1.38 MB per revolution) and ~4 MB while
+the table is written (the summary, the compared columns kept for the ideal counterpart).
+With ``--plots`` the peak is ~306 MB before and after (the tables pickled to the output workers).
 """
 from __future__ import annotations
 

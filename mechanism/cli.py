@@ -175,9 +175,9 @@ def ideal_counterpart(config: RunConfig, result, workers=None):
     """The ideal joint's run for comparison, at the cheapest step that keeps its documented agreement
     (``IDEAL_STEP``: RK4 at 1e-4 s matches 1e-5 s to < 1e-9, mechanism.studies.reproduce.cases), resampled
     by cubic splines onto the bearing run's sample times when those are finer (error < 1e-9 relative
-    for these smooth signals; measured in tests/test_kernels.py). ``workers``: the resampling runs in the
-    first output worker, which imported scipy.interpolate while the run ran (the same function, the same
-    numbers)."""
+    for these smooth signals; measured in tests/test_kernels.py; ``record.resample``, scipy's spline without
+    importing scipy.interpolate). ``workers``: the resampling runs in the first output worker (the same
+    function, the same numbers)."""
     from dataclasses import replace
 
     from mechanism.cosim.record import resample
