@@ -144,7 +144,7 @@ def run_monolithic(system: System, link: BearingLink, bearing: BallBearing, q0: 
                 t_a = solver.t_old
                 first = None
                 for r in (r for r in range(nb) if now[r] != loaded[r]):
-                    def delta(s, r=r):
+                    def delta(s, r=r, dense=dense):
                         return zone(dense(s))[r]
                     if (delta(t_a) > 0.0) != (delta(t_stop) > 0.0):
                         t_r = brentq(delta, t_a, t_stop, xtol=1e-14, rtol=4 * np.finfo(float).eps)

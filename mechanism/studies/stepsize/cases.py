@@ -6,11 +6,10 @@ import hashlib
 import itertools
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
+
 import numpy as np
-
-
 
 #: the reference's sampling interval and the study's default output interval [s]
 OUTPUT_INTERVAL = 1e-5

@@ -3,8 +3,21 @@ from __future__ import annotations
 
 from collections import Counter
 
-from mechanism.studies.stepsize.cases import (ADAPTIVE, STABLE, DEFAULT_STEPS, DEFAULT_TOLS, DIVERGENCE, MAX_STEPS_PER_CASE, ORDER_CEILING, ORDER_FLOOR, OUTPUT_INTERVAL, StudyConfig, parse_grid, parse_settings)
-from mechanism.studies.stepsize.runs import (replot, run_study)
+from mechanism.studies.stepsize.cases import (
+    ADAPTIVE,
+    DEFAULT_STEPS,
+    DEFAULT_TOLS,
+    DIVERGENCE,
+    MAX_STEPS_PER_CASE,
+    ORDER_CEILING,
+    ORDER_FLOOR,
+    OUTPUT_INTERVAL,
+    STABLE,
+    StudyConfig,
+    parse_grid,
+    parse_settings,
+)
+from mechanism.studies.stepsize.runs import replot, run_study
 from mechanism.studies.stepsize.tables import step_limit
 
 

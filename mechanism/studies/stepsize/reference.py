@@ -6,10 +6,11 @@ import json
 import math
 import os
 import time
-from dataclasses import replace
 from pathlib import Path
+
 import numpy as np
-from mechanism.studies.stepsize.cases import (REFERENCE_COLUMNS, window)
+
+from mechanism.studies.stepsize.cases import REFERENCE_COLUMNS, window
 
 
 # ------------------------------------------------------------------------------------- reference

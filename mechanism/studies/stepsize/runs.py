@@ -8,16 +8,39 @@ import os
 import socket
 import sys
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Iterable
+
 from mechanism.output.results import write_rows
 from mechanism.studies.parallel import requested_workers
-from mechanism.studies.stepsize.cases import (ADAPTIVE, COLUMNS, COLUMN_NAMES, DIVERGENT, ERROR, FAILED, NONFINITE, REFERENCE_COLUMNS, SKIPPED, STABLE, StudyConfig, build_cases, physical_case, reference_key)
-from mechanism.studies.stepsize.figures import (plot_study)
-from mechanism.studies.stepsize.reference import (_clean, check_rtol, combine_reference, compare, load_reference,
-                                                   reference_run_job, save_reference)
-from mechanism.studies.stepsize.tables import (summarize, summary_markdown)
+from mechanism.studies.stepsize.cases import (
+    ADAPTIVE,
+    COLUMN_NAMES,
+    COLUMNS,
+    DIVERGENT,
+    ERROR,
+    FAILED,
+    NONFINITE,
+    REFERENCE_COLUMNS,
+    SKIPPED,
+    STABLE,
+    StudyConfig,
+    build_cases,
+    physical_case,
+    reference_key,
+)
+from mechanism.studies.stepsize.figures import plot_study
+from mechanism.studies.stepsize.reference import (
+    _clean,
+    check_rtol,
+    combine_reference,
+    compare,
+    load_reference,
+    reference_run_job,
+    save_reference,
+)
+from mechanism.studies.stepsize.tables import summarize, summary_markdown
 
 
 # ------------------------------------------------------------------------------------ one case
