@@ -30,6 +30,8 @@ the measured results; in short:
 * **Adaptive**: scheme ``adaptive`` (``mechanism.cosim.adaptive``) runs once per ``--tols`` value; its
   step axis is the mean accepted step.
 
+A missing reference is computed beside the cases (its run and its rtol/10 floor run are two jobs of the
+pool); the cases that need it are compared with it once it is there (``runs.case_job``, ``runs.assess_case``).
 Cases run in parallel (a process pool of ``--workers``, default the core count, or a Dask
 cluster given by ``--scheduler tcp://HOST:PORT``; the same case function either way); each case
 opens and frees its own FMU instance and records its pid/worker and start/end time. A failing case

@@ -3,8 +3,21 @@ from __future__ import annotations
 
 from collections import Counter
 
-from mechanism.studies.stepsize.cases import (ADAPTIVE, STABLE, DEFAULT_STEPS, DEFAULT_TOLS, DIVERGENCE, MAX_STEPS_PER_CASE, ORDER_CEILING, ORDER_FLOOR, OUTPUT_INTERVAL, StudyConfig, parse_grid, parse_settings)
-from mechanism.studies.stepsize.runs import (replot, run_study)
+from mechanism.studies.stepsize.cases import (
+    ADAPTIVE,
+    DEFAULT_STEPS,
+    DEFAULT_TOLS,
+    DIVERGENCE,
+    MAX_STEPS_PER_CASE,
+    ORDER_CEILING,
+    ORDER_FLOOR,
+    OUTPUT_INTERVAL,
+    STABLE,
+    StudyConfig,
+    parse_grid,
+    parse_settings,
+)
+from mechanism.studies.stepsize.runs import replot, run_study
 from mechanism.studies.stepsize.tables import step_limit
 
 
@@ -104,7 +117,7 @@ def register(subparsers) -> None:
                    help="run the cases on this Dask distributed scheduler instead (needs the 'studies' extra)")
     p.add_argument("--max-steps-per-case", type=int, default=MAX_STEPS_PER_CASE,
                    help=f"skip fixed-step cases with more communication steps (default {MAX_STEPS_PER_CASE}: "
-                        "about a minute through the FMU; 1e-7 s over 2 revs at 1200 rpm is 1e6 steps)")
+                        "about 30 s through the FMU; 1e-7 s over 2 revs at 1200 rpm is 1e6 steps)")
     p.add_argument("--allow-slow", action="store_true", help="run every case whatever its step count")
     p.add_argument("--divergence", type=float, default=DIVERGENCE,
                    help=f"max relative error beyond which a completed run counts as unstable (default {DIVERGENCE})")

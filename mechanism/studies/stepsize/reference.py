@@ -6,36 +6,70 @@ import json
 import math
 import os
 import time
-from dataclasses import replace
 from pathlib import Path
+
 import numpy as np
-from mechanism.studies.stepsize.cases import (REFERENCE_COLUMNS, window)
+
+from mechanism.studies.stepsize.cases import REFERENCE_COLUMNS, window
 
 
 # ------------------------------------------------------------------------------------- reference
-def compute_reference(phys: dict) -> dict:
-    """Run the monolithic reference of a physical case, and again at rtol/10 to measure its own error
-    (the *floor*: max relative force and eccentricity differences over the window); return the sampled
-    columns of the first (lists), the floor and meta."""
+def reference_run(phys: dict, rtol: float | None = None) -> dict:
+    """One monolithic run of a physical case (at ``rtol``, default the case's): {"columns": the sampled
+    ``REFERENCE_COLUMNS`` (arrays), "ok", "message", "wall_time_s", "rhs_calls", "pid"}."""
     from mechanism.run import RunConfig, run
     config = RunConfig(rpm=phys["rpm"], revs=phys["revs"], balls=phys["balls"], mode="monolithic",
                        settings=dict(phys["settings"]), output_interval=phys["output_interval"],
-                       method=phys["method"], rtol=phys["rtol"], progress=False)
+                       method=phys["method"], rtol=phys["rtol"] if rtol is None else rtol, progress=False)
     start = time.perf_counter()
     result = run(config)
     wall = time.perf_counter() - start
-    if not result.ok:
-        raise RuntimeError(f"the monolithic reference failed: {result.message}")
-    data = {c: result[c].tolist() for c in REFERENCE_COLUMNS if result.has(c)}
-    check = run(replace(config, rtol=phys["rtol"] / 10))
+    return {"columns": {c: np.asarray(result[c]) for c in REFERENCE_COLUMNS if result.has(c)}, "ok": result.ok,
+            "message": result.message, "wall_time_s": wall, "rhs_calls": result.meta.get("rhs_calls"),
+            "pid": os.getpid()}
+
+
+def reference_run_job(phys: dict, rtol: float | None = None) -> dict:
+    """``reference_run`` for an executor: never raises (a failure is {"error": message})."""
+    try:
+        return reference_run(phys, rtol)
+    except Exception as err:
+        return {"error": f"{type(err).__name__}: {err}"}
+
+
+def check_rtol(phys: dict) -> float:
+    """The tolerance of the run that measures the reference's own error (its floor): rtol / 10."""
+    return phys["rtol"] / 10
+
+
+def combine_reference(phys: dict, main: dict, check: dict | None) -> dict:
+    """The reference of a physical case from its run (``reference_run``) and the run at ``check_rtol`` (or
+    None): the sampled columns of the first (lists), the floor (max relative force and eccentricity
+    differences of the two over the window; {} without a usable check) and meta. RuntimeError if the run
+    failed."""
+    if "error" in main:
+        raise RuntimeError(f"the monolithic reference failed: {main['error']}")
+    if not main["ok"]:
+        raise RuntimeError(f"the monolithic reference failed: {main['message']}")
+    data = {c: np.asarray(v).tolist() for c, v in main["columns"].items()}
     floor = {}
-    if check.ok and len(check["time"]) == len(result["time"]):
+    if check and check.get("ok") and len(check["columns"]["time"]) == len(data["time"]):
         case = {"dt_ref": phys["output_interval"], "window": window(phys["revs"], 60.0 / phys["rpm"])}
-        metrics = compare({c: check[c] for c in REFERENCE_COLUMNS if check.has(c)}, data, case)
+        metrics = compare(check["columns"], data, case)
         floor = {"force_max_rel": metrics["err_force_max_rel"], "ecc_max_rel": metrics["err_ecc_max_rel"],
                  "force_rms_rel": metrics["err_force_rms_rel"], "peak_error_rel": metrics["peak_error_rel"]}
-    return {"columns": data, "floor": floor, "wall_time_s": wall, "rhs_calls": result.meta.get("rhs_calls"),
-            "pid": os.getpid()}
+    return {"columns": data, "floor": floor, "wall_time_s": main["wall_time_s"], "rhs_calls": main["rhs_calls"],
+            "check_wall_time_s": (check or {}).get("wall_time_s"), "pid": main["pid"]}
+
+
+def compute_reference(phys: dict) -> dict:
+    """Run the monolithic reference of a physical case, and again at rtol/10 to measure its own error
+    (the *floor*: max relative force and eccentricity differences over the window); return the sampled
+    columns of the first (lists), the floor and meta (``combine_reference``)."""
+    main = reference_run(phys)
+    if not main["ok"]:
+        return combine_reference(phys, main, None)           # raises
+    return combine_reference(phys, main, reference_run(phys, check_rtol(phys)))
 
 
 def reference_job(phys: dict) -> dict:
@@ -68,6 +102,7 @@ def save_reference(cache: Path, key: str, phys: dict, ref: dict) -> None:
     np.savez(tmp, **arrays)
     tmp.replace(reference_path(cache, key))
     meta = {"physical_case": phys, "wall_time_s": ref.get("wall_time_s"), "rhs_calls": ref.get("rhs_calls"),
+            "check_wall_time_s": ref.get("check_wall_time_s"),
             "floor (rtol vs rtol/10, over the window)": ref.get("floor")}
     (cache / f"reference_{key}.json").write_text(json.dumps(meta, indent=2) + "\n")
 
