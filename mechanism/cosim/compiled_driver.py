@@ -47,6 +47,18 @@ def component_kind(endpoint) -> int | None:
     return None
 
 
+def cached() -> bool:
+    """True if ``compiled_loop.run_steps`` is compiled in this process or numba's disk cache has it for the
+    current source (numba's index of the function, valid for this file's timestamp); False if the first chunk
+    will compile it (the first run after installing or changing the kernels: tens of seconds)."""
+    if cl.run_steps.overloads:
+        return True
+    try:   # numba's cache index (private API): {} when missing or stale
+        return bool(cl.run_steps._cache._cache_file._load_index())
+    except Exception:   # noqa: BLE001  (another numba: assume cached, the bar shows its ETA as before)
+        return True
+
+
 def eligible(loop) -> bool:
     """True if ``loop`` (a started ``CouplingLoop``) can run compiled (see the module docstring)."""
     scheme = loop.scheme
