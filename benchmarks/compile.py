@@ -1,8 +1,9 @@
 """The first run in a fresh numba cache (compiling every kernel) and a warm run after it (issue 11: first run
 <= 15 s, warm headline <= 3 s).
 
-For each setting of ``--opt`` (numba's ``NUMBA_OPT``; ``default``: the variable unset, i.e. whatever
-``mechanism`` chooses), ``--repeat`` times, interleaved so that load changes hit the settings alike: one
+For each setting of ``--env`` (``default``: as the environment is, without ``NUMBA_OPT``; or variables to set, e.g.
+``NUMBA_OPT=2`` or ``MECHANISM_COMPILE_WORKER=0,NUMBA_OPT=2``), ``--repeat`` times, interleaved so that load
+changes hit the settings alike: one
 ``python -m mechanism <command> --out <tmp>`` in a new empty ``NUMBA_CACHE_DIR`` (cold: it compiles), then the same
 command again in that cache (warm: it loads). Prints the wall time and the CPU time (user + system, of the
 child) of each, and the load average (this machine is shared: compare CPU times, and pairs from one run).
@@ -12,7 +13,8 @@ functions that took longest to compile, exclusive of their callees, with the num
 compiled for each (more than one: argument types that differ between calls, e.g. a literal or an omitted
 argument).
 
-    python benchmarks/compile.py [--command "run --quiet --no-plots"] [--opt default 2 3] [--repeat 1] [--events]
+    python benchmarks/compile.py [--command "run --quiet --no-plots"] [--env default MECHANISM_COMPILE_WORKER=0]
+                                 [--repeat 1] [--events]
 
 Runs against whatever ``mechanism`` is on the path (PYTHONPATH=<checkout>).
 """
@@ -87,24 +89,25 @@ def report_events(path: str, top: int) -> None:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--command", default="run --quiet --no-plots", help="the mechanism command line to time")
-    p.add_argument("--opt", nargs="+", default=["default"], help="NUMBA_OPT values to compare (default: unset)")
+    p.add_argument("--env", nargs="+", default=["default"],
+                   help="settings to compare: 'default' or NAME=VALUE[,NAME=VALUE...]")
     p.add_argument("--repeat", type=int, default=1)
     p.add_argument("--events", action="store_true", help="record and print the cold run's compile events")
     p.add_argument("--top", type=int, default=25)
     a = p.parse_args()
     print(f"load average {os.getloadavg()}")
     for r in range(a.repeat):
-        for opt in a.opt:
+        for setting in a.env:
             with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
                 env = dict(os.environ, NUMBA_CACHE_DIR=cache)
                 env.pop("NUMBA_OPT", None)
-                if opt != "default":
-                    env["NUMBA_OPT"] = opt
+                if setting != "default":
+                    env.update(item.split("=", 1) for item in setting.split(","))
                 argv = [*shlex.split(a.command), "--out", out]
                 events = str(Path(out) / "events.json") if a.events else None
                 cold = timed(argv, env, events)
                 warm = timed(argv, env)
-                print(f"[{r + 1}] NUMBA_OPT={opt}: cold {cold[0]:6.1f} s wall, {cold[1]:6.1f} s CPU (exit {cold[2]}); "
+                print(f"[{r + 1}] {setting}: cold {cold[0]:6.1f} s wall, {cold[1]:6.1f} s CPU (exit {cold[2]}); "
                       f"warm {warm[0]:5.2f} s wall, {warm[1]:5.2f} s CPU (exit {warm[2]}); "
                       f"load {os.getloadavg()[0]:.1f}", flush=True)
                 if events:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mechanism.cosim import compiled_driver
+from mechanism.cosim import compiled_driver, warmup
 from mechanism.run import RunConfig, run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,3 +42,38 @@ def test_progress_bar_says_compiling_on_the_first_run(first, monkeypatch, capsys
     quiet = run(RunConfig(mode="inprocess", revs=0.05, rpm=1200, step=1e-5, progress=False))
     assert with_bar.ok and quiet.ok
     assert np.array_equal(with_bar.data, quiet.data, equal_nan=True)
+
+
+_COMPILED_IN_RUN = """
+import sys
+from numba.core import event
+names = []
+class Rec(event.Listener):
+    def on_start(self, ev):
+        pass
+    def on_end(self, ev):
+        f = getattr(ev.data.get("dispatcher"), "py_func", None)
+        if f is not None:
+            names.append(f.__module__ + "." + f.__qualname__)
+event.register("numba:compile", Rec())
+from mechanism.run import RunConfig, run
+assert run(RunConfig(mode="inprocess", revs=0.002, progress=False)).ok
+print("\\n".join(names))
+"""
+
+
+def test_warmup_compiles_what_run_steps_calls(tmp_path):
+    """In a fresh cache, after ``mechanism.cosim.warmup``, the run's compile of ``run_steps`` loads the loop's
+    functions and their callees from the cache (the warm-up's argument types are run_steps' own): the run compiles
+    only run_steps, the multibody kernels and what it calls from Python before the first chunk."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), PYTHONPATH=str(ROOT), MECHANISM_COMPILE_WORKER="0")
+    subprocess.run([sys.executable, "-m", "mechanism.cosim.warmup"], env=env, cwd=ROOT, check=True)
+    out = subprocess.run([sys.executable, "-c", _COMPILED_IN_RUN], env=env, cwd=ROOT, capture_output=True,
+                         text=True, check=True).stdout.split()
+    loop_side = ("mechanism.cosim.compiled_loop.", "mechanism.cosim.component_call.",
+                 "mechanism.cosim.component_kernel.", "mechanism.cosim.fmu_native.", "mechanism.cosim.law_kernel.")
+    allowed = {"mechanism.cosim.compiled_loop.run_steps"} | {
+        f"{f.py_func.__module__}.{f.py_func.__qualname__}" for f, _ in warmup.RUN_COMPILES}
+    compiled_again = {name for name in out if name.startswith(loop_side)} - allowed
+    assert not compiled_again
+    assert "mechanism.cosim.compiled_loop.run_steps" in out

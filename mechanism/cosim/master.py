@@ -596,17 +596,25 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     bar = tqdm(total=n_steps, desc=settings.description, unit="step", disable=not settings.progress,
                mininterval=0.5, leave=False)
     poll = getattr(observe, "poll", None) if loop.kernels and loop._observe_in_kernel else None
+    warmup = None
+    if settings.compiled_loop and getattr(endpoint, "kind", None) in ("in-process", "fmu"):
+        from mechanism.cosim import compiled_driver
+        if loop.kernels:   # a first run: the loop's own functions compile in a second process (None if cached)
+            warmup = compiled_driver.start_warmup()
     try:
+        if warmup is not None:
+            bar.set_postfix_str("compiling kernels (first run)")
         loop.start(y)
         loop.record(rec, 0.0, y)
         compiled = None
-        if settings.compiled_loop and getattr(endpoint, "kind", None) in ("in-process", "fmu"):
-            from mechanism.cosim import compiled_driver
-            if compiled_driver.eligible(loop):
-                compiled = compiled_driver.CompiledLoop(loop, rec, y, every, n_steps)
+        if (settings.compiled_loop and getattr(endpoint, "kind", None) in ("in-process", "fmu")
+                and compiled_driver.eligible(loop)):
+            compiled = compiled_driver.CompiledLoop(loop, rec, y, every, n_steps)
         compiling = compiled is not None and not compiled_driver.cached()
         if compiling:     # the first chunk compiles the step (tens of seconds): say so, not an ETA from it
             bar.set_postfix_str("compiling kernels (first run)")
+            # its functions in the cache: the first chunk loads them (a noted signal still stops the run)
+            compiled_driver.finish_warmup(warmup, poll=None if poll is None else lambda: poll(0.0))
         while compiled is not None and step < n_steps:     # chunks of 500 steps: the bar and the poll between
             last = min(n_steps, (step // 500 + 1) * 500)
             y = compiled.run(step + 1, last, y)
@@ -638,6 +646,9 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
         info["failure"] = {"step": step, "time_s": t, "cause": cause}
         return finish(rec, info, "failed", f"stopped at step {step} (t = {t:.9g} s): {cause}",
                       endpoint, bar, loop)
+    finally:
+        if warmup is not None:   # not waited for (the Python loop ran, or a failure before the first chunk): end it
+            compiled_driver.finish_warmup(warmup, 0)
     return finish(rec, info, "completed", "", endpoint, bar, loop)
 
 
