@@ -9,6 +9,12 @@ FMU, the law not compiled, the kernels off) the Python loop (the reference) runs
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -45,6 +51,57 @@ def component_kind(endpoint) -> int | None:
         if all(functions.get(fmu_native.FUNCTIONS[slot - 1]) is not None for slot in _FMU_CALLS):
             return cc.FMU
     return None
+
+
+def cached() -> bool:
+    """True if ``compiled_loop.run_steps`` is compiled in this process or numba's disk cache has it for the
+    current source (numba's index of the function, valid for this file's timestamp); False if the first chunk
+    will compile it (the first run after installing or changing the kernels: tens of seconds)."""
+    if cl.run_steps.overloads:
+        return True
+    try:   # numba's cache index (private API): {} when missing or stale
+        return bool(cl.run_steps._cache._cache_file._load_index())
+    except Exception:   # noqa: BLE001  (another numba: assume cached, the bar shows its ETA as before)
+        return True
+
+
+def start_warmup() -> subprocess.Popen | None:
+    """On a first run (``cached`` False): start ``mechanism.cosim.warmup`` in a second process, which compiles the
+    compiled loop's own functions into numba's cache (the same source files, the same ``NUMBA_CACHE_DIR``) while
+    this process compiles the kernels; None when cached, with ``MECHANISM_COMPILE_WORKER=0`` or one CPU, or if the
+    process cannot start (this one compiles all then)."""
+    if os.environ.get("MECHANISM_COMPILE_WORKER", "1") == "0" or (os.cpu_count() or 1) < 2 or cached():
+        return None
+    root = str(Path(__file__).resolve().parents[2])     # the folder holding the mechanism package imported here
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
+    try:
+        return subprocess.Popen([sys.executable, "-m", "mechanism.cosim.warmup"], cwd=root, env=env,
+                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except OSError:
+        return None
+
+
+def finish_warmup(process: subprocess.Popen | None, timeout: float = 300.0,
+                  poll: Callable[[], None] | None = None) -> None:
+    """Wait for ``start_warmup``'s process (at most ``timeout`` s; 0: not at all), calling ``poll`` (e.g. the run's
+    signal check, which may raise) every 0.5 s; end the process if it still runs then."""
+    if process is None:
+        return
+    deadline = time.monotonic() + timeout
+    try:
+        while True:
+            try:
+                process.wait(min(0.5, max(0.0, deadline - time.monotonic())))
+                return
+            except subprocess.TimeoutExpired:
+                if time.monotonic() >= deadline:
+                    return
+                if poll is not None:
+                    poll()
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
 
 
 def eligible(loop) -> bool:

@@ -148,8 +148,9 @@ def hold_model(model, past, npast, fm):
 def trial_model(a, x, jumps, njumps, fm):
     """``InterfaceJacobianImplicit.begin_step`` with a trial: the mean tangent matrices, the step's own drift
     through both ends (start exchange a, the last pass's end x) and the onset jumps' quadratic terms, into fm."""
-    m = np.empty(13)
-    _copy(m, a, 7)
+    m = np.zeros(13)    # zeros as everywhere here (np.empty would compile one more of numba's array makers)
+    for i in range(7):
+        m[i] = a[i]
     for i in range(6):
         m[7 + i] = 0.5 * (a[7 + i] + x[7 + i])
     px, py = _linear(m, x[1], x[2], x[3], x[4])
@@ -243,17 +244,21 @@ def k1_valid(fm, t0, xin, xf):
 @njit(cache=True)
 def _push(past, npast, x, history):
     """Append x to the exchange history (``history`` kept: the scheme's deque); returns the new count."""
+    row = npast       # loops, not slice assignments (their shape-mismatch error path compiles for seconds: _copy)
     if npast == history:
         for k in range(history - 1):
-            past[k, :] = past[k + 1, :]
-        past[history - 1, :] = x
-        return history
-    past[npast, :] = x
-    return npast + 1
+            for j in range(past.shape[1]):
+                past[k, j] = past[k + 1, j]
+        row = history - 1
+    for j in range(past.shape[1]):
+        past[row, j] = x[j]
+    return row + 1
 
 
 @njit(cache=True)
-def _fail(fail, code, step, t, v0=0.0, v1=0.0, v2=0.0, v3=0.0, v4=0.0, v5=0.0):
+def _fail(fail, code, step, t, v0, v1, v2, v3, v4, v5):
+    """Note a failure in ``fail`` (see OK .. COMPONENT). Callers pass every argument, the code as ``np.int64`` and
+    the values as floats: one compiled specialisation (literal codes and omitted defaults made nine)."""
     fail[0], fail[1], fail[2] = code, step, t
     fail[3], fail[4], fail[5], fail[6], fail[7], fail[8] = v0, v1, v2, v3, v4, v5
 
@@ -272,9 +277,9 @@ def _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, 
     status = cc.exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out)
     if status < 0 or status > 1:
         if kind == cc.IN_PROCESS:
-            _fail(fail, INPUTS, step, t, sent[0], sent[1], sent[2], sent[3], sent[4], sent[5])
+            _fail(fail, np.int64(INPUTS), step, t, sent[0], sent[1], sent[2], sent[3], sent[4], sent[5])
         else:
-            _fail(fail, COMPONENT, step, t, status, DO_STEP)
+            _fail(fail, np.int64(COMPONENT), step, t, float(status), float(DO_STEP), 0.0, 0.0, 0.0, 0.0)
         return False
     counts[7] += 1
     return True
@@ -309,7 +314,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
     start = np.zeros(13)
     prev = np.zeros(13)
     trial = np.zeros(13)
-    snap_past = np.zeros_like(past)
+    snap_past = np.zeros((past.shape[0], past.shape[1]))
     snap_xin = np.zeros(6)
     snap_xf = np.zeros(2)
     snap_cs = np.zeros(cs.shape[0])
@@ -331,7 +336,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
         if iterative:
             status, state = cc.save(kind, cs, snap_cs, H)
             if status < 0 or status > 1:
-                _fail(fail, COMPONENT, step, t, status, GET_STATE)
+                _fail(fail, np.int64(COMPONENT), step, t, float(status), float(GET_STATE), 0.0, 0.0, 0.0, 0.0)
                 return y
             counts[9] += 1
             _copy_rows(snap_past, past, past.shape[0])
@@ -339,7 +344,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             _copy(snap_xf, xf, xf.shape[0])
         have_prev = False
         have_trial = False
-        ntrial = 0
+        ntrial = np.int64(0)     # not the literal 0: a call's literal argument is a specialisation of its own
         passes = 0
         m = 1
         hs = h
@@ -370,14 +375,14 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                 acc[i] = 0.0
             y_end, drift, finite = advance(y, t0, hs, m, t, fm, dy, k1v, I, R, L, LR, W, u, acc, p1, stages)
             if not finite:
-                _fail(fail, NOT_FINITE, step, t)
+                _fail(fail, np.int64(NOT_FINITE), step, t, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
                 if iterative:
                     _release(kind, H, state, counts)
                 return y
             if constrained:
                 fset[4] = drift
                 if drift > max_cv:
-                    _fail(fail, CONSTRAINT, step, t, drift)
+                    _fail(fail, np.int64(CONSTRAINT), step, t, drift, 0.0, 0.0, 0.0, 0.0, 0.0)
                     if iterative:
                         _release(kind, H, state, counts)
                     return y
@@ -396,7 +401,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             for k in range(8):
                 s += out[k]
             if not math.isfinite(s):
-                _fail(fail, FORCE, step, t, out[0], out[1])
+                _fail(fail, np.int64(FORCE), step, t, out[0], out[1], 0.0, 0.0, 0.0, 0.0)
                 if iterative:
                     _release(kind, H, state, counts)
                 return y
@@ -418,7 +423,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             if passes == limit:
                 counts[5] += 1
                 break
-            nj = 0
+            nj = np.int64(0)
             if has_law:
                 cage_end = fset[5] + ((y_end[tj] - fset[6]) * PC[11] + (y_end[ti] - fset[7]) * PC[12])
                 nj = onset_jumps(PC, start, cage_start, end, cage_end, jumps)
@@ -436,7 +441,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             _copy(xf, snap_xf, xf.shape[0])
             status = cc.restore(kind, cs, snap_cs, H, state)
             if status < 0 or status > 1:
-                _fail(fail, COMPONENT, step, t, status, SET_STATE)
+                _fail(fail, np.int64(COMPONENT), step, t, float(status), float(SET_STATE), 0.0, 0.0, 0.0, 0.0)
                 _release(kind, H, state, counts)
                 return y
             _copy_rows(trial_jumps, jumps, nj)
@@ -445,7 +450,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
         if iterative:   # CouplingLoop.release
             status = _release(kind, H, state, counts)
             if status < 0 or status > 1:
-                _fail(fail, COMPONENT, step, t, status, FREE_STATE)
+                _fail(fail, np.int64(COMPONENT), step, t, float(status), float(FREE_STATE), 0.0, 0.0, 0.0, 0.0)
                 return y
         if energy:   # the accepted pass's integrals (CouplingLoop._integrate_energy)
             d_, wc = stage_integrals(PE, stages, m, hs, fset[9])
@@ -468,7 +473,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             if ns > 0:   # the component's samples (the endpoint's sample / sample_into)
                 status = cc.sample(kind, cs, H, vr_real, vr_int, vr_bool, samples)
                 if status < 0 or status > 1:
-                    _fail(fail, COMPONENT, step, t, status, SAMPLE)
+                    _fail(fail, np.int64(COMPONENT), step, t, float(status), float(SAMPLE), 0.0, 0.0, 0.0, 0.0)
                     return y
                 for k in range(ns):
                     row[cols[9 + k]] = samples[k]

@@ -157,21 +157,24 @@ _int_address = _address_of(types.int32, "integer/boolean values (fmi2Integer, fm
 
 @njit(cache=True)
 def _missing(H, slot) -> bool:
-    """The handle is too short, invalidated, or the FMU lacks the function of ``slot``."""
+    """The handle is too short, invalidated, or the FMU lacks the function of ``slot``. Callers pass the slot
+    as ``np.int64``: a literal constant would compile one specialisation per slot (first run's compile)."""
     return H.size < SLOTS or H[COMPONENT] == 0 or H[slot] == 0
 
 
 @njit(cache=True)
-def _fits(vr, values) -> bool:
-    return vr.size <= values.size and vr.flags.c_contiguous and values.flags.c_contiguous
+def _fits(vr, size, contiguous) -> bool:
+    """``vr`` fits values of ``size`` (C-contiguous if ``contiguous``); the values' size and flag, not the array:
+    one specialisation for the float64 and the int32 values."""
+    return vr.size <= size and vr.flags.c_contiguous and contiguous
 
 
 @njit(cache=True)
 def set_reals(H, vr, values) -> int:
     """fmi2SetReal of ``values[:len(vr)]`` (float64) to ``vr`` (uint32)."""
-    if _missing(H, SET_REAL):
+    if _missing(H, np.int64(SET_REAL)):
         return NO_FUNCTION
-    if not _fits(vr, values):
+    if not _fits(vr, values.size, values.flags.c_contiguous):
         return BAD_ARGUMENT
     return _call_arrays(H[SET_REAL], H[COMPONENT], _vr_address(vr), np.int64(vr.size), _real_address(values))
 
@@ -179,9 +182,9 @@ def set_reals(H, vr, values) -> int:
 @njit(cache=True)
 def get_reals(H, vr, out) -> int:
     """fmi2GetReal of ``vr`` (uint32) into ``out[:len(vr)]`` (float64)."""
-    if _missing(H, GET_REAL):
+    if _missing(H, np.int64(GET_REAL)):
         return NO_FUNCTION
-    if not _fits(vr, out):
+    if not _fits(vr, out.size, out.flags.c_contiguous):
         return BAD_ARGUMENT
     return _call_arrays(H[GET_REAL], H[COMPONENT], _vr_address(vr), np.int64(vr.size), _real_address(out))
 
@@ -189,9 +192,9 @@ def get_reals(H, vr, out) -> int:
 @njit(cache=True)
 def get_integers(H, vr, out) -> int:
     """fmi2GetInteger of ``vr`` (uint32) into ``out[:len(vr)]`` (int32)."""
-    if _missing(H, GET_INTEGER):
+    if _missing(H, np.int64(GET_INTEGER)):
         return NO_FUNCTION
-    if not _fits(vr, out):
+    if not _fits(vr, out.size, out.flags.c_contiguous):
         return BAD_ARGUMENT
     return _call_arrays(H[GET_INTEGER], H[COMPONENT], _vr_address(vr), np.int64(vr.size), _int_address(out))
 
@@ -199,9 +202,9 @@ def get_integers(H, vr, out) -> int:
 @njit(cache=True)
 def get_booleans(H, vr, out) -> int:
     """fmi2GetBoolean of ``vr`` (uint32) into ``out[:len(vr)]`` (int32: fmi2Boolean is a C int)."""
-    if _missing(H, GET_BOOLEAN):
+    if _missing(H, np.int64(GET_BOOLEAN)):
         return NO_FUNCTION
-    if not _fits(vr, out):
+    if not _fits(vr, out.size, out.flags.c_contiguous):
         return BAD_ARGUMENT
     return _call_arrays(H[GET_BOOLEAN], H[COMPONENT], _vr_address(vr), np.int64(vr.size), _int_address(out))
 
@@ -209,7 +212,7 @@ def get_booleans(H, vr, out) -> int:
 @njit(cache=True)
 def do_step(H, t, h) -> int:
     """fmi2DoStep(t, h, noSetFMUStatePriorToCurrentPoint = fmi2True)."""
-    if _missing(H, DO_STEP):
+    if _missing(H, np.int64(DO_STEP)):
         return NO_FUNCTION
     return _call_do_step(H[DO_STEP], H[COMPONENT], np.float64(t), np.float64(h), np.int32(1))
 
@@ -252,7 +255,7 @@ def sample_into(H, vr_real, vr_int, vr_bool, row) -> int:
 @njit(cache=True)
 def get_state(H):
     """fmi2GetFMUstate: (status, the new state's pointer as int64; 0 if none was made)."""
-    if _missing(H, GET_STATE):
+    if _missing(H, np.int64(GET_STATE)):
         return NO_FUNCTION, np.int64(0)
     status, state = _call_out_pointer(H[GET_STATE], H[COMPONENT], np.int64(0))
     return status, state
@@ -261,7 +264,7 @@ def get_state(H):
 @njit(cache=True)
 def set_state(H, state) -> int:
     """fmi2SetFMUstate of the state ``state`` (a pointer from ``get_state``)."""
-    if _missing(H, SET_STATE):
+    if _missing(H, np.int64(SET_STATE)):
         return NO_FUNCTION
     if state == 0:
         return BAD_ARGUMENT
@@ -271,7 +274,7 @@ def set_state(H, state) -> int:
 @njit(cache=True)
 def free_state(H, state) -> int:
     """fmi2FreeFMUstate of ``state`` (a pointer from ``get_state``; 0: nothing to free, OK)."""
-    if _missing(H, FREE_STATE):
+    if _missing(H, np.int64(FREE_STATE)):
         return NO_FUNCTION
     if state == 0:
         return 0

@@ -148,10 +148,11 @@ class CouplingLoop:
         #: step (``_integrate_energy``): D, W_drive, W_cage, W_applied, and the work of the bearing force on the
         #: mechanism (W_link); rolled back with the step (``snapshot``/``restore``)
         self.integrals = np.zeros(5) if energy is not None and link is not None else None
-        if self.integrals is not None:
-            self._acc = np.zeros(3)                                   # W_drive, W_applied, W_link of one step
-            self._p1 = np.zeros(3)                                    # the powers at the end state (next k1)
-            self._stages = np.zeros((5 * max(1, settings.max_substeps), 8))
+        # also without an account: the kernels always get these arrays (one compiled specialisation of
+        # kernels.advance and finish, not a second one for the omitted arguments); unused then
+        self._acc = np.zeros(3)                                       # W_drive, W_applied, W_link of one step
+        self._p1 = np.zeros(3)                                        # the powers at the end state (next k1)
+        self._stages = np.zeros((5 * max(1, settings.max_substeps), 8))
         self.inputs = None
         self.force = (0.0, 0.0)
         self.mobility = 0.0
@@ -227,8 +228,7 @@ class CouplingLoop:
             fx = fy = ex = ey = 0.0
         row = self._no_row if rec is None else rec.next_row()
         self._kn.finish(y, ex, ey, fx, fy, self._I, self._R, self._L, self._LR, self._W, self._u, self._dy,
-                        self._lam, row, self._probes, self._probe_scale, t, self._cv, self._react,
-                        self._p1 if self.integrals is not None else None)
+                        self._lam, row, self._probes, self._probe_scale, t, self._cv, self._react, self._p1)
         self._end = (y, t)
         if rec is None:
             return
@@ -317,9 +317,10 @@ class CouplingLoop:
         if fm is not None:     # the compiled step (kinematics of the end state included)
             if self._end[0] is not y:
                 self._end = (None, None)
-            if self.integrals is None:
+            if self.integrals is None:   # the account's arrays also without one (see __init__): same state
                 y, drift, finite = self._kn.advance(y, t0, hs, m, t, fm, self._dy, self._k1_valid(y, t0, fm),
-                                                    self._I, self._R, self._L, self._LR, self._W, self._u)
+                                                    self._I, self._R, self._L, self._LR, self._W, self._u,
+                                                    self._acc, self._p1, self._stages)
             else:
                 self._acc[:] = 0.0
                 y, drift, finite = self._kn.advance(y, t0, hs, m, t, fm, self._dy, self._k1_valid(y, t0, fm),
@@ -595,20 +596,35 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     bar = tqdm(total=n_steps, desc=settings.description, unit="step", disable=not settings.progress,
                mininterval=0.5, leave=False)
     poll = getattr(observe, "poll", None) if loop.kernels and loop._observe_in_kernel else None
+    warmup = None
+    if settings.compiled_loop and getattr(endpoint, "kind", None) in ("in-process", "fmu"):
+        from mechanism.cosim import compiled_driver
+        if loop.kernels:   # a first run: the loop's own functions compile in a second process (None if cached)
+            warmup = compiled_driver.start_warmup()
     try:
+        if warmup is not None:
+            bar.set_postfix_str("compiling kernels (first run)")
         loop.start(y)
         loop.record(rec, 0.0, y)
         compiled = None
-        if settings.compiled_loop and getattr(endpoint, "kind", None) in ("in-process", "fmu"):
-            from mechanism.cosim import compiled_driver
-            if compiled_driver.eligible(loop):
-                compiled = compiled_driver.CompiledLoop(loop, rec, y, every, n_steps)
+        if (settings.compiled_loop and getattr(endpoint, "kind", None) in ("in-process", "fmu")
+                and compiled_driver.eligible(loop)):
+            compiled = compiled_driver.CompiledLoop(loop, rec, y, every, n_steps)
+        compiling = compiled is not None and not compiled_driver.cached()
+        if compiling:     # the first chunk compiles the step (tens of seconds): say so, not an ETA from it
+            bar.set_postfix_str("compiling kernels (first run)")
+            # its functions in the cache: the first chunk loads them (a noted signal still stops the run)
+            compiled_driver.finish_warmup(warmup, poll=None if poll is None else lambda: poll(0.0))
         while compiled is not None and step < n_steps:     # chunks of 500 steps: the bar and the poll between
             last = min(n_steps, (step // 500 + 1) * 500)
             y = compiled.run(step + 1, last, y)
             if compiled.failure is not None:
                 raise RunFailure(*compiled.failure)
             step, t = last, last * h
+            if compiling:   # the rate and ETA from here on, without the compile
+                compiling = False
+                bar.set_postfix_str("", refresh=False)
+                bar.reset()
             if step % 500 == 0:
                 bar.update(500)
                 if poll is not None:
@@ -630,6 +646,9 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
         info["failure"] = {"step": step, "time_s": t, "cause": cause}
         return finish(rec, info, "failed", f"stopped at step {step} (t = {t:.9g} s): {cause}",
                       endpoint, bar, loop)
+    finally:
+        if warmup is not None:   # not waited for (the Python loop ran, or a failure before the first chunk): end it
+            compiled_driver.finish_warmup(warmup, 0)
     return finish(rec, info, "completed", "", endpoint, bar, loop)
 
 

@@ -1,0 +1,79 @@
+"""The first run's compile (issue 11): the progress bar says it is compiling instead of an ETA measured on the
+compile, and ``compiled_driver.cached`` tells a fresh numba cache from a warm one. Compile times themselves are
+measured by benchmarks/compile.py, not here."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mechanism.cosim import compiled_driver, warmup
+from mechanism.run import RunConfig, run
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_a_fresh_cache_is_not_cached(tmp_path):
+    code = "from mechanism.cosim import compiled_driver as d; print(d.cached())"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), PYTHONPATH=str(ROOT))
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=tmp_path,
+                         check=True).stdout
+    assert out.strip() == "False"
+
+
+def test_compiled_in_this_process_is_cached():
+    assert run(RunConfig(mode="inprocess", revs=0.01, progress=False)).ok
+    assert compiled_driver.cached()
+
+
+@pytest.mark.parametrize("first", [True, False])
+def test_progress_bar_says_compiling_on_the_first_run(first, monkeypatch, capsys):
+    """On a first run the bar shows "compiling kernels (first run)" until the first chunk is done, then counts
+    the steps from there (a reset clock: its rate and ETA without the compile); the numbers are the same."""
+    monkeypatch.setattr(compiled_driver, "cached", lambda: not first)
+    config = RunConfig(mode="inprocess", revs=0.05, rpm=1200, step=1e-5)
+    with_bar = run(config)
+    err = capsys.readouterr().err
+    assert ("compiling kernels (first run)" in err) == first
+    quiet = run(RunConfig(mode="inprocess", revs=0.05, rpm=1200, step=1e-5, progress=False))
+    assert with_bar.ok and quiet.ok
+    assert np.array_equal(with_bar.data, quiet.data, equal_nan=True)
+
+
+_COMPILED_IN_RUN = """
+import sys
+from numba.core import event
+names = []
+class Rec(event.Listener):
+    def on_start(self, ev):
+        pass
+    def on_end(self, ev):
+        f = getattr(ev.data.get("dispatcher"), "py_func", None)
+        if f is not None:
+            names.append(f.__module__ + "." + f.__qualname__)
+event.register("numba:compile", Rec())
+from mechanism.run import RunConfig, run
+assert run(RunConfig(mode="inprocess", revs=0.002, progress=False)).ok
+print("\\n".join(names))
+"""
+
+
+def test_warmup_compiles_what_run_steps_calls(tmp_path):
+    """In a fresh cache, after ``mechanism.cosim.warmup``, the run's compile of ``run_steps`` loads the loop's
+    functions and their callees from the cache (the warm-up's argument types are run_steps' own): the run compiles
+    only run_steps, the multibody kernels and what it calls from Python before the first chunk."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), PYTHONPATH=str(ROOT), MECHANISM_COMPILE_WORKER="0")
+    subprocess.run([sys.executable, "-m", "mechanism.cosim.warmup"], env=env, cwd=ROOT, check=True)
+    out = subprocess.run([sys.executable, "-c", _COMPILED_IN_RUN], env=env, cwd=ROOT, capture_output=True,
+                         text=True, check=True).stdout.split()
+    loop_side = ("mechanism.cosim.compiled_loop.", "mechanism.cosim.component_call.",
+                 "mechanism.cosim.component_kernel.", "mechanism.cosim.fmu_native.", "mechanism.cosim.law_kernel.")
+    allowed = {"mechanism.cosim.compiled_loop.run_steps"} | {
+        f"{f.py_func.__module__}.{f.py_func.__qualname__}" for f, _ in warmup.RUN_COMPILES}
+    compiled_again = {name for name in out if name.startswith(loop_side)} - allowed
+    assert not compiled_again
+    assert "mechanism.cosim.compiled_loop.run_steps" in out
