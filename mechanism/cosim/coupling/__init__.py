@@ -53,11 +53,12 @@ from .extrapolation import LinearExtrapolation, QuadraticExtrapolation
 from .hold import ZeroOrderHold, ZeroOrderHoldJacobi
 from .implicit import InterfaceJacobianImplicit, InterfaceJacobianSecant
 from .jacobian import InterfaceJacobian, InterfaceJacobianDrift
+from .law_model import LawModel
 
 SCHEMES: dict[str, type[Scheme]] = {cls.name: cls for cls in (
     InterfaceJacobianDrift, InterfaceJacobian, InterfaceJacobianSecant, InterfaceJacobianImplicit,
     ZeroOrderHold, ZeroOrderHoldJacobi, LinearExtrapolation,
-    QuadraticExtrapolation)}
+    QuadraticExtrapolation, LawModel)}
 DEFAULT_SCHEME = InterfaceJacobianImplicit.name
 
 
@@ -69,6 +70,6 @@ def make_scheme(name: str) -> Scheme:
 
 
 __all__ = ["DEFAULT_SCHEME", "SCHEMES", "Exchanged", "ForceModel", "InterfaceJacobian", "InterfaceJacobianDrift",
-           "InterfaceJacobianImplicit", "InterfaceJacobianSecant",
+           "InterfaceJacobianImplicit", "InterfaceJacobianSecant", "LawModel",
            "LinearExtrapolation", "QuadraticExtrapolation", "Scheme", "ZeroOrderHold", "ZeroOrderHoldJacobi",
            "make_scheme"]

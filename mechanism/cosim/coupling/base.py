@@ -96,6 +96,9 @@ class Scheme:
     ring_speeds = "end"
     #: True: the master repeats each step with rollback until ``converged`` (``set_trial`` gets the last pass)
     iterative = False
+    #: True: the scheme's force model is the component's law (law_model.py); the master hands it the law
+    #: (``bind_law``) at the start and the cage angle and ring speeds at t_n (``set_cage``) before each step
+    uses_law = False
 
     def __init__(self):
         self.past: deque[Exchanged] = deque(maxlen=self.history)

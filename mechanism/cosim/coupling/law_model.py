@@ -1,0 +1,113 @@
+"""Model-based coupling (``law-model``): the component's own force law as the interface model within a step.
+
+The interface-Jacobian schemes continue the exchanged force along the component's tangent matrices,
+F_n + K (e - e_n) + C (v - v_n), a LINEAR model; over a coarse step (1e-4 s, two or three steps per period
+of the 3.6-5.8 kHz contact ringing) the deflection changes a lot within the step and Hertz's exponent 1.5
+makes that model poor (docs/coupling.md, "At 1e-4 s"). When the master knows the component's law (the ball
+bearing's eq. 18-19, whose parameters the master sets itself, ``fmu_bearing.ball_bearing.BallBearing``), it
+can integrate the step with that law instead, the component's exchanged force correcting it:
+
+    F(tau, e, v) = F_law(e, v; phi(tau)) + c_n + (c* - c_n) s / h,     s = tau - t_n,
+
+    c_n = F_n - F_law(e_n, v_n; phi_n)       (the component's force at t_n against the law there)
+    c*  = F* - F_law(e*, v*; phi*)           (the same at the end of the last pass; 0 on pass 0)
+    phi(tau) = phi_n + omega_m s              (the cage angle, eq. 16 with the ring speeds at t_n)
+
+where phi_n is the kinematic cage angle at t_n (``energy.kinematic_cage_angle``, which the component's cage
+angle equals with secant ring speeds) and omega_m = eq. (16) of the ring speeds at t_n. The component stays
+the authority at every communication point: F(t_n) = F_n, and after the iterated pass F(t_n + h) = F*.
+With an exact law (the in-process component, or an FMU with the same parameters) c_n = c* = 0 and the
+coupling error is the master's RK4 error with its substeps; a law that differs from the component's is
+corrected at both ends, to first order in between (the linear correction ramp).
+
+The step is iterated with rollback like ``jacobian-implicit`` (``iterative``): pass 0 holds c_n, later passes
+ramp to the last pass's c*; ``converged`` compares two passes' end-of-step force and eccentricity. Contact
+onsets are part of the law (no ``onset_jumps`` correction). The ring speeds sent to the component are the
+secant ones (implicit.py). The tangent matrices K_n, C_n are used only to choose the master's substeps.
+
+Needs the law (``bind_law``, from the master's ``contact_law``) and, each step, the cage angle and ring
+speeds at t_n (``set_cage``); without a law it falls back to ``jacobian-implicit``'s force model.
+"""
+from __future__ import annotations
+
+from fmu_bearing.ball_bearing import BallBearing
+
+from .base import Exchanged
+from .implicit import InterfaceJacobianImplicit
+
+
+class LawModel(InterfaceJacobianImplicit):
+    """The component's force law plus the exchanged correction as the force within a step (iterated)."""
+
+    name = "law-model"
+    uses_law = True
+
+    def __init__(self):
+        super().__init__()
+        self.law: BallBearing | None = None
+        self._evaluate = None
+        self._cage = 0.0             # phi_n [rad]
+        self._omega = 0.0            # omega_m [rad/s] (eq. 16 at t_n)
+        self._wi = self._wo = 0.0    # ring speeds at t_n [rad/s] (the oil-film law's entrainment speed)
+        self._h_step = 1.0
+        self._c0 = (0.0, 0.0)
+        self._c1 = (0.0, 0.0)
+
+    def bind_law(self, law: BallBearing | None) -> None:
+        """The component's force law (None: fall back to ``jacobian-implicit``'s force model)."""
+        self.law = law
+        self._evaluate = None
+        if law is not None:
+            self._evaluate = law.evaluate
+            try:   # the compiled second implementation of the law (tests/test_kernels.py holds it to evaluate)
+                import numpy as np
+
+                from mechanism.cosim import law_kernel
+                P, out, loads = law_kernel.pack_bearing(law), np.zeros(10), np.zeros(law.n_balls)
+                kernel = law_kernel.evaluate
+
+                def evaluate(ex, ey, vx, vy, cage, wi, wo):
+                    kernel(P, ex, ey, vx, vy, cage, wi, wo, out, loads)
+                    return out[0], out[1]
+                self._evaluate = evaluate
+            except ImportError:    # pragma: no cover - numba missing
+                pass
+
+    def set_cage(self, cage_angle: float, omega_inner: float, omega_outer: float) -> None:
+        """The kinematic cage angle [rad] and ring speeds [rad/s] at the start t_n of the coming step."""
+        self._cage = cage_angle
+        self._omega = self.law.cage_velocity(omega_inner, omega_outer) if self.law is not None else 0.0
+        self._wi, self._wo = omega_inner, omega_outer
+
+    def _law(self, s: float, e_x: float, e_y: float, v_x: float, v_y: float) -> tuple[float, float]:
+        """F_law(e, v; phi_n + omega_m s) [N] (eq. 18-19)."""
+        out = self._evaluate(e_x, e_y, v_x, v_y, self._cage + self._omega * s, self._wi, self._wo)
+        return float(out[0]), float(out[1])
+
+    def begin_step(self, t: float, h: float) -> None:
+        super().begin_step(t, h)          # jacobian-implicit's model: the fallback without a law
+        if self.law is None:
+            return
+        a = self.past[-1]
+        fx, fy = self._law(0.0, a.e_x, a.e_y, a.v_x, a.v_y)
+        self._c0 = (a.F_x - fx, a.F_y - fy)
+        x: Exchanged | None = self.trial
+        if x is None:
+            self._c1 = self._c0
+        else:
+            dt = x.t - a.t
+            fx, fy = self._law(dt, x.e_x, x.e_y, x.v_x, x.v_y)
+            self._c1 = (x.F_x - fx, x.F_y - fy)
+        self._h_step = h
+
+    def force(self, tau, e_x, e_y, v_x, v_y):
+        if self.law is None:
+            return self._model(tau, e_x, e_y, v_x, v_y)
+        s = tau - self.past[-1].t
+        fx, fy = self._law(s, e_x, e_y, v_x, v_y)
+        r = s / self._h_step
+        return (fx + self._c0[0] + r * (self._c1[0] - self._c0[0]),
+                fy + self._c0[1] + r * (self._c1[1] - self._c0[1]))
+
+    def force_model(self, t0, h):
+        return self._model if self.law is None else None
