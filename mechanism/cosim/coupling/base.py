@@ -115,6 +115,11 @@ class Scheme:
     def force(self, tau: float, e_x: float, e_y: float, v_x: float, v_y: float) -> tuple[float, float]:
         raise NotImplementedError
 
+    def tangent_bound(self) -> Exchanged:
+        """The exchange whose tangent matrices the master sizes this step's substeps by (``master.substeps``;
+        called after ``begin_step``): the last one."""
+        return self.past[-1]
+
     def force_model(self, t0: float, h: float) -> ForceModel | None:
         """This step's force as a ``ForceModel`` (called after ``begin_step(t0, h)``), or None if the
         scheme's force is not of that form (the master then calls ``force``)."""

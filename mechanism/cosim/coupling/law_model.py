@@ -30,6 +30,8 @@ speeds at t_n (``set_cage``); without a law it falls back to ``jacobian-implicit
 """
 from __future__ import annotations
 
+import math
+
 from fmu_bearing.ball_bearing import BallBearing
 
 from .base import Exchanged
@@ -50,6 +52,8 @@ class LawModel(InterfaceJacobianImplicit):
         self._omega = 0.0            # omega_m [rad/s] (eq. 16 at t_n)
         self._wi = self._wo = 0.0    # ring speeds at t_n [rad/s] (the oil-film law's entrainment speed)
         self._h_step = 1.0
+        self._k_seen = 0.0           # the largest eigenvalue of the law's tangent stiffness met in this step [N/m]
+        self._tangent = (0.0,) * 6   # its K and C (k_xx, k_xy, k_yy, c_xx, c_xy, c_yy)
         self._c0 = (0.0, 0.0)
         self._c1 = (0.0, 0.0)
 
@@ -68,7 +72,7 @@ class LawModel(InterfaceJacobianImplicit):
 
                 def evaluate(ex, ey, vx, vy, cage, wi, wo):
                     kernel(P, ex, ey, vx, vy, cage, wi, wo, out, loads)
-                    return out[0], out[1]
+                    return out
                 self._evaluate = evaluate
             except ImportError:    # pragma: no cover - numba missing
                 pass
@@ -80,8 +84,12 @@ class LawModel(InterfaceJacobianImplicit):
         self._wi, self._wo = omega_inner, omega_outer
 
     def _law(self, s: float, e_x: float, e_y: float, v_x: float, v_y: float) -> tuple[float, float]:
-        """F_law(e, v; phi_n + omega_m s) [N] (eq. 18-19)."""
+        """F_law(e, v; phi_n + omega_m s) [N] (eq. 18-19); keeps the stiffest tangent seen in this step."""
         out = self._evaluate(e_x, e_y, v_x, v_y, self._cage + self._omega * s, self._wi, self._wo)
+        k = _eig_max(out[2], out[3], out[4])
+        if k > self._k_seen:
+            self._k_seen, self._tangent = k, (float(out[2]), float(out[3]), float(out[4]),
+                                              float(out[5]), float(out[6]), float(out[7]))
         return float(out[0]), float(out[1])
 
     def begin_step(self, t: float, h: float) -> None:
@@ -89,6 +97,10 @@ class LawModel(InterfaceJacobianImplicit):
         if self.law is None:
             return
         a = self.past[-1]
+        if self.trial is None:    # a new step: the stiffest tangent so far is the start's or the predicted end's
+            self._k_seen, self._tangent = _eig_max(a.k_xx, a.k_xy, a.k_yy), (a.k_xx, a.k_xy, a.k_yy,
+                                                                             a.c_xx, a.c_xy, a.c_yy)
+            self._law(h, a.e_x + h * a.v_x, a.e_y + h * a.v_y, a.v_x, a.v_y)
         fx, fy = self._law(0.0, a.e_x, a.e_y, a.v_x, a.v_y)
         self._c0 = (a.F_x - fx, a.F_y - fy)
         x: Exchanged | None = self.trial
@@ -99,6 +111,15 @@ class LawModel(InterfaceJacobianImplicit):
             fx, fy = self._law(dt, x.e_x, x.e_y, x.v_x, x.v_y)
             self._c1 = (x.F_x - fx, x.F_y - fy)
         self._h_step = h
+
+    def tangent_bound(self) -> Exchanged:
+        """The stiffest tangent of the law met in this step so far (the start, the predicted end e_n + v_n h, every
+        force evaluation of the earlier passes): the master sizes the substeps by it, so that a step that starts
+        out of contact and meets one is subcycled (the start's tangent alone would give one RK4 step)."""
+        a = self.past[-1]
+        if self.law is None:
+            return a
+        return Exchanged(a.t, a.e_x, a.e_y, a.v_x, a.v_y, a.F_x, a.F_y, *self._tangent)
 
     def force(self, tau, e_x, e_y, v_x, v_y):
         if self.law is None:
@@ -111,3 +132,8 @@ class LawModel(InterfaceJacobianImplicit):
 
     def force_model(self, t0, h):
         return self._model if self.law is None else None
+
+
+def _eig_max(a: float, b: float, c: float) -> float:
+    """Largest eigenvalue of the symmetric 2x2 matrix [[a, b], [b, c]]."""
+    return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
