@@ -101,9 +101,11 @@ def test_substeps_follow_the_stiffest_tangent_of_the_step():
     x = _exchange(law, 0.0, e_free, v_in, CAGE)
     assert x.k_yy == 0.0
     scheme = _scheme(law, x, 1e-4)
-    bound = scheme.tangent_bound()
+    bound = scheme.substep_tangent()
     ref = law.evaluate(e_free[0], e_free[1] + 1e-4 * v_in[1], *v_in, CAGE + law.cage_velocity(W_IN, W_OUT) * 1e-4)
-    assert ref.k_yy > 0.0 and bound.k_yy == pytest.approx(ref.k_yy, rel=1e-12)
+    r = scheme.resolution
+    assert ref.k_yy > 0.0 and bound.k_yy == pytest.approx(r * r * ref.k_yy, rel=1e-12)
+    assert bound.c_yy == pytest.approx(r * ref.c_yy, rel=1e-12)
 
 
 # ---------------------------------------------------------------------------------------------- runs

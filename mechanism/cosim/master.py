@@ -306,7 +306,7 @@ class CouplingLoop:
             if scheme.uses_law and self.contact_law is not None:
                 scheme.set_cage(self.cage_angle(y[:self.n]), self.inputs[4], self.inputs[5])
             scheme.begin_step(t0, h)
-            m = substeps(h, scheme.tangent_bound(), self.mobility, settings.substep_limit,
+            m = substeps(h, scheme.substep_tangent(), self.mobility, settings.substep_limit,
                          settings.max_substeps) if scheme.uses_tangent else 1
             if self.kernels:
                 model = scheme.force_model(t0, h)

@@ -115,7 +115,7 @@ class Scheme:
     def force(self, tau: float, e_x: float, e_y: float, v_x: float, v_y: float) -> tuple[float, float]:
         raise NotImplementedError
 
-    def tangent_bound(self) -> Exchanged:
+    def substep_tangent(self) -> Exchanged:
         """The exchange whose tangent matrices the master sizes this step's substeps by (``master.substeps``;
         called after ``begin_step``): the last one."""
         return self.past[-1]

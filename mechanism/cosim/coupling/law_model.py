@@ -43,6 +43,8 @@ class LawModel(InterfaceJacobianImplicit):
 
     name = "law-model"
     uses_law = True
+    #: substeps per communication step, relative to those RK4's stability needs (``substep_tangent``)
+    resolution = 4.0
 
     def __init__(self):
         super().__init__()
@@ -112,14 +114,19 @@ class LawModel(InterfaceJacobianImplicit):
             self._c1 = (x.F_x - fx, x.F_y - fy)
         self._h_step = h
 
-    def tangent_bound(self) -> Exchanged:
+    def substep_tangent(self) -> Exchanged:
         """The stiffest tangent of the law met in this step so far (the start, the predicted end e_n + v_n h, every
-        force evaluation of the earlier passes): the master sizes the substeps by it, so that a step that starts
-        out of contact and meets one is subcycled (the start's tangent alone would give one RK4 step)."""
+        force evaluation of the earlier passes), K scaled by ``resolution``^2 and C by ``resolution``: the master
+        sizes the substeps by it (``master.substeps``: h_sub (sqrt(k g) + c g) <= substep_limit), so that a step
+        that starts out of contact and meets one is subcycled, ``resolution`` times finer than RK4's stability
+        needs (the coupling's error is the RK4 error of the contact ringing, chiefly its phase)."""
         a = self.past[-1]
         if self.law is None:
             return a
-        return Exchanged(a.t, a.e_x, a.e_y, a.v_x, a.v_y, a.F_x, a.F_y, *self._tangent)
+        r, (kxx, kxy, kyy, cxx, cxy, cyy) = self.resolution, self._tangent
+        r2 = r * r
+        return Exchanged(a.t, a.e_x, a.e_y, a.v_x, a.v_y, a.F_x, a.F_y, r2 * kxx, r2 * kxy, r2 * kyy,
+                         r * cxx, r * cxy, r * cyy)
 
     def force(self, tau, e_x, e_y, v_x, v_y):
         if self.law is None:
