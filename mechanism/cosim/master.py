@@ -308,6 +308,8 @@ class CouplingLoop:
             scheme.begin_step(t0, h)
             m = substeps(h, scheme.substep_tangent(), self.mobility, settings.substep_limit,
                          settings.max_substeps) if scheme.uses_tangent else 1
+            if scheme.uses_law:
+                scheme.set_substeps(m)
             if self.kernels:
                 model = scheme.force_model(t0, h)
                 fm = model.coefficients if model is not None else None

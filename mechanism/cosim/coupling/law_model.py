@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 
 from fmu_bearing.ball_bearing import BallBearing
+from fmu_bearing.parameters import DAMPING_CONSTANT
 
 from .base import Exchanged
 from .implicit import InterfaceJacobianImplicit
@@ -54,6 +55,11 @@ class LawModel(InterfaceJacobianImplicit):
         self._omega = 0.0            # omega_m [rad/s] (eq. 16 at t_n)
         self._wi = self._wo = 0.0    # ring speeds at t_n [rad/s] (the oil-film law's entrainment speed)
         self._h_step = 1.0
+        self._m = 1                  # the master's RK4 substeps in this pass (``set_substeps``)
+        self._calls = 0              # force evaluations in this pass: four per RK4 substep, in order
+        self._bounds: dict[int, tuple[float, float, float, float]] = {}   # (e, v) at substep starts, this pass
+        self._recorded: tuple[int, dict] | None = None                    # (m, bounds) of the last pass
+        self._onsets: dict[int, tuple[float, float]] = {}                 # substep -> onset correction [N]
         self._k_seen = 0.0           # the largest eigenvalue of the law's tangent stiffness met in this step [N/m]
         self._tangent = (0.0,) * 6   # its K and C (k_xx, k_xy, k_yy, c_xx, c_xy, c_yy)
         self._c0 = (0.0, 0.0)
@@ -113,6 +119,58 @@ class LawModel(InterfaceJacobianImplicit):
             fx, fy = self._law(dt, x.e_x, x.e_y, x.v_x, x.v_y)
             self._c1 = (x.F_x - fx, x.F_y - fy)
         self._h_step = h
+        if self.trial is None:
+            self._recorded = None
+        elif self._bounds:
+            self._recorded = (self._m, self._bounds)
+        self._bounds, self._onsets, self._calls = {}, {}, 0
+
+    def set_substeps(self, m: int) -> None:
+        """The master's RK4 substeps in the coming pass. From the second pass on, each ball's contact onset in a
+        substep of the last pass (same substeps) gets the onset correction of that substep (``_onset_corrections``)."""
+        self._m = m
+        if self._recorded is not None and self._recorded[0] == m and self.trial is not None:
+            self._onsets = self._onset_corrections(m, self._recorded[1], self.trial)
+
+    def _onset_corrections(self, m: int, bounds: dict, end: Exchanged) -> dict[int, tuple[float, float]]:
+        """Per substep, the constant force that makes RK4's impulse of each damping jump exact.
+
+        A ball entering the load zone at t_k + theta h_s switches its damping force J = C max(v_r, 0) u_r on at
+        once (eq. 18, as ``implicit.onset_jumps``). RK4 samples it at its stages s = 0, h_s/2 (twice), h_s with
+        weights 1/6, 1/3, 1/3, 1/6: the impulse J h_s (1/6 + 2/3 [theta < 1/2]) instead of J h_s (1 - theta), an
+        O(h_s) error per onset (first order). A constant g over the substep is integrated exactly; g = J [(1 -
+        theta) - 1/6 - 2/3 [theta < 1/2]] gives the exact impulse. theta from the linear interpolation of
+        delta_r = e . u_r - P_d/2 between the substep's ends (of the last pass; the end of the step is ``end``)."""
+        law = self.law
+        if law.damping_model != DAMPING_CONSTANT or law.damping_coefficient == 0.0:
+            return {}
+        C, half, hs = law.damping_coefficient, law.half_clearance, self._h_step / m
+        points = dict(bounds)
+        points[m] = (end.e_x, end.e_y, end.v_x, end.v_y)
+        spacing = 2.0 * math.pi / law.n_balls
+        out = {}
+        for k in range(m):
+            a, b = points.get(k), points.get(k + 1)
+            if a is None or b is None:
+                continue
+            pa, pb = self._cage + self._omega * k * hs, self._cage + self._omega * (k + 1) * hs
+            gx = gy = 0.0
+            for r in range(law.n_balls):
+                ca, sa = math.cos(pa + r * spacing), math.sin(pa + r * spacing)
+                cb, sb = math.cos(pb + r * spacing), math.sin(pb + r * spacing)
+                da, db = a[0] * ca + a[1] * sa - half, b[0] * cb + b[1] * sb - half
+                if not da <= 0.0 < db:
+                    continue
+                theta = da / (da - db)
+                phi = pa + r * spacing + theta * (pb - pa)
+                ux, uy = math.cos(phi), math.sin(phi)
+                vr = (a[2] + theta * (b[2] - a[2])) * ux + (a[3] + theta * (b[3] - a[3])) * uy
+                w = (1.0 - theta) - (1.0 / 6.0 + (2.0 / 3.0 if theta < 0.5 else 0.0))
+                g = C * max(vr, 0.0) * w
+                gx, gy = gx + g * ux, gy + g * uy
+            if gx or gy:
+                out[k] = (gx, gy)
+        return out
 
     def substep_tangent(self) -> Exchanged:
         """The stiffest tangent of the law met in this step so far (the start, the predicted end e_n + v_n h, every
@@ -133,6 +191,13 @@ class LawModel(InterfaceJacobianImplicit):
             return self._model(tau, e_x, e_y, v_x, v_y)
         s = tau - self.past[-1].t
         fx, fy = self._law(s, e_x, e_y, v_x, v_y)
+        k, stage = divmod(self._calls, 4)          # the master's RK4: four evaluations per substep, in order
+        self._calls += 1
+        if stage == 0:
+            self._bounds[k] = (e_x, e_y, v_x, v_y)
+        g = self._onsets.get(k)
+        if g is not None:
+            fx, fy = fx + g[0], fy + g[1]
         r = s / self._h_step
         return (fx + self._c0[0] + r * (self._c1[0] - self._c0[0]),
                 fy + self._c0[1] + r * (self._c1[1] - self._c0[1]))
