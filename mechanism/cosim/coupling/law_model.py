@@ -46,6 +46,8 @@ class LawModel(InterfaceJacobianImplicit):
     uses_law = True
     #: substeps per communication step, relative to those RK4's stability needs (``substep_tangent``)
     resolution = 4.0
+    #: False: no onset correction (``_onset_corrections``; for measurements)
+    onset_correction = True
 
     def __init__(self):
         super().__init__()
@@ -129,7 +131,7 @@ class LawModel(InterfaceJacobianImplicit):
         """The master's RK4 substeps in the coming pass. From the second pass on, each ball's contact onset in a
         substep of the last pass (same substeps) gets the onset correction of that substep (``_onset_corrections``)."""
         self._m = m
-        if self._recorded is not None and self._recorded[0] == m and self.trial is not None:
+        if self.onset_correction and self._recorded is not None and self._recorded[0] == m and self.trial is not None:
             self._onsets = self._onset_corrections(m, self._recorded[1], self.trial)
 
     def _onset_corrections(self, m: int, bounds: dict, end: Exchanged) -> dict[int, tuple[float, float]]:
