@@ -21,12 +21,14 @@ coupling error is the master's RK4 error with its substeps; a law that differs f
 corrected at both ends, to first order in between (the linear correction ramp).
 
 The step is iterated with rollback like ``jacobian-implicit`` (``iterative``): pass 0 holds c_n, later passes
-ramp to the last pass's c*; ``converged`` compares two passes' end-of-step force and eccentricity. Contact
-onsets are part of the law (no ``onset_jumps`` correction). The ring speeds sent to the component are the
-secant ones (implicit.py). The tangent matrices K_n, C_n are used only to choose the master's substeps.
+ramp to the last pass's c*; ``converged`` compares two passes' end-of-step force and eccentricity. The ring
+speeds sent to the component are the secant ones (implicit.py). The master's RK4 substeps are sized by the
+stiffest law tangent met in the step, ``resolution`` times finer than stability needs (``substep_tangent``),
+and from the second pass each contact onset gets a constant correction over its substep that makes RK4's
+impulse of the damping jump exact (``_onset_corrections``). docs/coupling.md, "Model-based coupling".
 
 Needs the law (``bind_law``, from the master's ``contact_law``) and, each step, the cage angle and ring
-speeds at t_n (``set_cage``); without a law it falls back to ``jacobian-implicit``'s force model.
+speeds at t_n (``set_cage``) and the substeps (``set_substeps``); without a law it is ``jacobian-implicit``.
 """
 from __future__ import annotations
 
