@@ -24,6 +24,10 @@ secant        speeds (theta_{n+1} - theta_n)/h: its cage angle exact            
 jacobian-     the step repeated with rollback (FMU get/set state):  Gauss-Seidel nominal 2nd
 implicit      K, C the mean of both ends, d the drift of this step  iterated
               through F_{n+1} of the last pass (implicit.py)
+law-model     the component's force law (eq. 18-19, known to the     Gauss-Seidel the master's RK4
+              master) within the step, plus the exchanged            iterated     substeps'
+              corrections F - F_law at both ends (law_model.py;
+              without a law: jacobian-implicit)
 ============  =====================================================  ==========  ===============
 
 "accuracy" is the nominal order for a smooth force; the measured orders are lower (the damping
