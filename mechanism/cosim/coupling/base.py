@@ -97,7 +97,8 @@ class Scheme:
     #: True: the master repeats each step with rollback until ``converged`` (``set_trial`` gets the last pass)
     iterative = False
     #: True: the scheme's force model is the component's law (law_model.py); the master hands it the law
-    #: (``bind_law``) at the start and the cage angle and ring speeds at t_n (``set_cage``) before each step
+    #: (``bind_law``) at the start, the cage angle and ring speeds at t_n (``set_cage``) before each step and the
+    #: step's RK4 substeps (``set_substeps``)
     uses_law = False
 
     def __init__(self):
