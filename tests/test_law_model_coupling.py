@@ -139,7 +139,7 @@ def _errors(r, ref) -> tuple[float, float]:
 def test_at_1e_4_s_the_error_is_the_substeps_not_the_step(reference_fifth, monkeypatch):
     """h = 1e-4 s over the start-up (0.2 revolution at 1200 rpm, impacts and contact onsets): the law-model's
     error is its RK4 substeps' (it falls with ``resolution``), far below the default scheme's at the same step.
-    Measured: pointwise |F| 2.5e-2, 1.6e-2, 8.0e-4 of the peak at resolution 1, 2, 4 (default 4); cage angle
+    Measured: pointwise |F| 2.5e-2, 1.6e-2, 8.0e-4 of the peak at resolution 1, 2, 4 (the default is 8); cage angle
     1.9e-6, 1.3e-6, 7.6e-8 rad; jacobian-implicit at 1e-4 s: 0.41 of the peak, 5.3e-5 rad."""
     from mechanism.cosim.coupling.law_model import LawModel
     default = _errors(_cosim("jacobian-implicit", 1e-4, 0.2), reference_fifth)

@@ -47,7 +47,7 @@ class LawModel(InterfaceJacobianImplicit):
     name = "law-model"
     uses_law = True
     #: substeps per communication step, relative to those RK4's stability needs (``substep_tangent``)
-    resolution = 4.0
+    resolution = 8.0
     #: False: no onset correction (``_onset_corrections``; for measurements)
     onset_correction = True
 
