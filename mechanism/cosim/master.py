@@ -280,6 +280,8 @@ class CouplingLoop:
         out = self.endpoint.initialize(u)
         self.inputs, self.force = u, out[:2]
         self.scheme.push(Exchanged(0.0, *u[:4], *out))
+        if self.scheme.uses_law:             # a model-based scheme: the law it integrates the step with
+            self.scheme.bind_law(self.contact_law)
         if self.scheme.uses_tangent:
             self.mobility = link.mobility(y[:n], 0.0)
 
@@ -301,9 +303,13 @@ class CouplingLoop:
         if endpoint is not None:
             exchange = endpoint.exchange if rec is None or self._exchange_sampled is None else self._exchange_sampled
             pending = exchange(t0, h, self.inputs) if scheme.ordering == "jacobi" else None
+            if scheme.uses_law and self.contact_law is not None:
+                scheme.set_cage(self.cage_angle(y[:self.n]), self.inputs[4], self.inputs[5])
             scheme.begin_step(t0, h)
-            m = substeps(h, scheme.past[-1], self.mobility, settings.substep_limit,
+            m = substeps(h, scheme.substep_tangent(), self.mobility, settings.substep_limit,
                          settings.max_substeps) if scheme.uses_tangent else 1
+            if scheme.uses_law:
+                scheme.set_substeps(m)
             if self.kernels:
                 model = scheme.force_model(t0, h)
                 fm = model.coefficients if model is not None else None

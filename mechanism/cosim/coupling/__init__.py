@@ -24,6 +24,10 @@ secant        speeds (theta_{n+1} - theta_n)/h: its cage angle exact            
 jacobian-     the step repeated with rollback (FMU get/set state):  Gauss-Seidel nominal 2nd
 implicit      K, C the mean of both ends, d the drift of this step  iterated
               through F_{n+1} of the last pass (implicit.py)
+law-model     the component's force law (eq. 18-19, known to the     Gauss-Seidel the master's RK4
+              master) within the step, plus the exchanged            iterated     substeps'
+              corrections F - F_law at both ends (law_model.py;
+              without a law: jacobian-implicit)
 ============  =====================================================  ==========  ===============
 
 "accuracy" is the nominal order for a smooth force; the measured orders are lower (the damping
@@ -53,11 +57,12 @@ from .extrapolation import LinearExtrapolation, QuadraticExtrapolation
 from .hold import ZeroOrderHold, ZeroOrderHoldJacobi
 from .implicit import InterfaceJacobianImplicit, InterfaceJacobianSecant
 from .jacobian import InterfaceJacobian, InterfaceJacobianDrift
+from .law_model import LawModel
 
 SCHEMES: dict[str, type[Scheme]] = {cls.name: cls for cls in (
     InterfaceJacobianDrift, InterfaceJacobian, InterfaceJacobianSecant, InterfaceJacobianImplicit,
     ZeroOrderHold, ZeroOrderHoldJacobi, LinearExtrapolation,
-    QuadraticExtrapolation)}
+    QuadraticExtrapolation, LawModel)}
 DEFAULT_SCHEME = InterfaceJacobianImplicit.name
 
 
@@ -69,6 +74,6 @@ def make_scheme(name: str) -> Scheme:
 
 
 __all__ = ["DEFAULT_SCHEME", "SCHEMES", "Exchanged", "ForceModel", "InterfaceJacobian", "InterfaceJacobianDrift",
-           "InterfaceJacobianImplicit", "InterfaceJacobianSecant",
+           "InterfaceJacobianImplicit", "InterfaceJacobianSecant", "LawModel",
            "LinearExtrapolation", "QuadraticExtrapolation", "Scheme", "ZeroOrderHold", "ZeroOrderHoldJacobi",
            "make_scheme"]

@@ -96,6 +96,10 @@ class Scheme:
     ring_speeds = "end"
     #: True: the master repeats each step with rollback until ``converged`` (``set_trial`` gets the last pass)
     iterative = False
+    #: True: the scheme's force model is the component's law (law_model.py); the master hands it the law
+    #: (``bind_law``) at the start, the cage angle and ring speeds at t_n (``set_cage``) before each step and the
+    #: step's RK4 substeps (``set_substeps``)
+    uses_law = False
 
     def __init__(self):
         self.past: deque[Exchanged] = deque(maxlen=self.history)
@@ -111,6 +115,11 @@ class Scheme:
 
     def force(self, tau: float, e_x: float, e_y: float, v_x: float, v_y: float) -> tuple[float, float]:
         raise NotImplementedError
+
+    def substep_tangent(self) -> Exchanged:
+        """The exchange whose tangent matrices the master sizes this step's substeps by (``master.substeps``;
+        called after ``begin_step``): the last one."""
+        return self.past[-1]
 
     def force_model(self, t0: float, h: float) -> ForceModel | None:
         """This step's force as a ``ForceModel`` (called after ``begin_step(t0, h)``), or None if the
