@@ -21,7 +21,7 @@ matplotlib.use("Agg")
 from mechanism.cosim.record import RunResult  # noqa: E402
 from mechanism.output.plots import crank_pi  # noqa: E402
 from mechanism.studies.reproduce.analysis import (figures_of)  # noqa: E402
-from mechanism.studies.reproduce.drawing import four_panels, pi_axis  # noqa: E402
+from mechanism.studies.reproduce.drawing import FigureFiles, four_panels, inputs_key, pi_axis  # noqa: E402
 from mechanism.studies.reproduce.cases import (BALL_COUNTS, SPEEDS, STUDY_RPM, paper_stiffness)  # noqa: E402
 from mechanism.studies.reproduce.figures_design import (DesignFigures)  # noqa: E402
 from mechanism.studies.reproduce.figures_speed import (SpeedFigures)  # noqa: E402
@@ -115,8 +115,11 @@ class Report(SpeedFigures, DesignFigures, Sections, LifeSection):
         w()
         w("\n".join(criteria_lines()))
         summary_at = len(self.lines)          # the verdict table goes here once every figure has its verdict
-        for section in self.sections():
-            section()
+        # the figures are drawn in forked processes while the text goes on (all complete when the block ends);
+        # a figure drawn from the same inputs before is not drawn again
+        with FigureFiles(self.fig_dir, inputs_key(self.runs, self.outcome.get("code_version", ""))):
+            for section in self.sections():
+                section()
         if self.missing:
             w("## Missing runs")
             w()
