@@ -278,10 +278,16 @@ class ForkedSaves:
         self._children.append((pid, r, Path(path)))
 
     def _reap(self, k: int) -> None:
-        pid, r, path = self._children.pop(k)
-        with os.fdopen(r, "rb") as f:
-            message = f.read().decode(errors="replace")
+        """Wait for child ``k`` (its entry stays until it is reaped: an interrupt here leaves no zombie behind
+        the next ``wait``)."""
+        pid, r, path = self._children[k]
+        chunks = []
+        while chunk := os.read(r, 65536):
+            chunks.append(chunk)
         _, status = os.waitpid(pid, 0)
+        del self._children[k]
+        os.close(r)
+        message = b"".join(chunks).decode(errors="replace")
         if status != 0:
             self._errors.append(f"writing {path.name} failed (exit code {os.waitstatus_to_exitcode(status)}):\n"
                                 + message)
