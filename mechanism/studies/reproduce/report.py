@@ -8,7 +8,12 @@ own numbers (axis ranges of its figures, converted from its kg-mm-s units) are t
 
 The report is one ``Report`` assembled from mixins: ``SpeedFigures`` (Fig. 11-19), ``DesignFigures``
 (Fig. 20-25), ``Sections`` (runs, units, stiffness variant, modelling choices) and ``LifeSection``
-(bearing rating life per operating point)."""
+(bearing rating life per operating point).
+
+The figures are written by ``drawing.FigureFiles``: in forked processes while the text is assembled, and not
+at all when the folder's figures were drawn from the same inputs (``drawing.inputs_key``: the runs' samples and
+meta, the drawing code, the package versions). So ``--force`` recomputes every run, and the figures are drawn
+again exactly when a recomputed run (or the code that draws) came out different."""
 from __future__ import annotations
 
 import time
