@@ -93,15 +93,3 @@ def test_a_figure_is_written_whole_or_not_at_all(tmp_path):
     save_figure(fig, path, dpi=50)
     plt.close(fig)
     assert path.read_bytes()[:4] == b"\x89PNG" and sorted(p.name for p in tmp_path.iterdir()) == ["f.png"]
-
-
-def test_warm_up_changes_no_later_figure(tmp_path):
-    """``warm_up`` (drawn by an output worker while the run runs) leaves the figures' bytes as they were."""
-    names = ("joint_force.png", "eccentricity.png")
-    for folder in ("a", "b"):
-        (tmp_path / folder).mkdir()
-    plots.plot_run(fake_run(8), tmp_path / "a", names=names)
-    plots.warm_up()
-    plots.plot_run(fake_run(8), tmp_path / "b", names=names)
-    for name in names:
-        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()

@@ -68,21 +68,6 @@ def _margins(fig, top: float, left: float = 0.85, right: float = 0.2, bottom: fl
                         wspace=wspace / pw if cols > 1 else 0.2, hspace=hspace / ph if rows > 1 else 0.2)
 
 
-def warm_up() -> None:
-    """Draw a small figure with the plots' fonts, sizes and special characters to memory: the first figure of
-    a process loads fonts and fills glyph caches (about 0.3 s of the first ``plot_run``), which an output worker
-    does while the run runs (``mechanism.output.workers``). Changes no file and no later figure."""
-    import io
-    fig, ax = plt.subplots(figsize=(2.0, 1.5))
-    ax.plot([0.0, 1.0], [0.0, 1.0], lw=0.8, label="µ π ² · −")
-    ax.set_xlabel("crank angle [π rad]")
-    ax.set_title("start-up", fontsize=9)
-    ax.legend(fontsize=8)
-    fig.suptitle("m/s² N·m µm", fontsize=10)
-    fig.savefig(io.BytesIO(), format="png", dpi=120, pil_kwargs={"compress_level": 1})
-    plt.close(fig)
-
-
 def _save(fig, path: Path) -> Path:
     # zlib level 1: a few percent larger files, several times faster to encode than the default 6
     save_figure(fig, path, dpi=120, pil_kwargs={"compress_level": 1})

@@ -7,8 +7,6 @@ two) when the command starts: it imports those modules while the master runs, th
 counterpart and draws the figures (two workers: a share each, ``SHARES``) while the command writes the CSV
 files. The files are the same bytes as drawn in-process (the same functions, ``plots.plot_run`` and
 ``record.resample``, run in another process) and are written atomically as before (``atomic.save_figure``).
-While it waits for its first job a worker also draws a small figure to memory (``plots.warm_up``: the fonts
-and glyph caches of the first figure, about 0.3 s of the first ``plot_run`` moved off the command's path).
 
 Robustness: the workers ignore SIGINT (the command decides what an interrupt does: ``run.stop_on_signals``)
 and end when the command's end of their pipe closes (the command died) or at ``close``; an error in a job is
@@ -71,18 +69,13 @@ def _forked(conn, ours, modules) -> None:
 
 
 def serve(conn, modules) -> None:
-    """A worker: import ``modules`` (and warm the plots' caches up, ``plots.warm_up``, when one of them is
-    ``mechanism.output.plots``), then answer each ``(job, args, kwargs)`` received on ``conn`` with
+    """A worker: import ``modules``, then answer each ``(job, args, kwargs)`` received on ``conn`` with
     ``("ok", value)`` or ``("error", exception)`` until ``None`` or the end of the connection."""
     for name in modules:
         try:
-            module = importlib.import_module(name)
+            importlib.import_module(name)
         except ImportError:   # the job will raise it where it is needed
-            continue
-        warm_up = getattr(module, "warm_up", None) if name == "mechanism.output.plots" else None
-        if warm_up is not None:
-            with contextlib.suppress(Exception):   # only a cost moved: the figures are drawn the same without
-                warm_up()
+            pass
     while True:
         try:
             job = conn.recv()
