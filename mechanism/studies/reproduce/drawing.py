@@ -68,7 +68,7 @@ def end_progress_monitor() -> None:
 
 class FigureFiles:
     """The report's figures written while the report goes on: ``save`` hands a built figure to a forked process
-    (``ForkedSaves``, at most ``processes`` at once) and returns. If the folder's ``KEY_FILE`` holds ``key``, a
+    (``ForkedSaves``, at most ``processes`` at once: by default one per CPU, none on one) and returns. If the folder's ``KEY_FILE`` holds ``key``, a
     figure whose file is there is not drawn again (its inputs did not change: the same bytes). The key is removed
     before any figure is drawn and written when all are complete, so it never stands for a half-drawn folder.
     Use as a context manager; ``save_figure`` writes through the one that is open."""
@@ -77,7 +77,9 @@ class FigureFiles:
         self.folder = Path(folder)
         self.key = key
         end_progress_monitor()
-        self.saves = ForkedSaves((os.cpu_count() or 1) if processes is None else processes, draw_figure)
+        if processes is None:   # one per CPU; on a single CPU nothing would draw beside this process
+            processes = cpu if (cpu := os.cpu_count() or 1) >= 2 else 0
+        self.saves = ForkedSaves(processes, draw_figure)
         self.skipped: list[str] = []
         self.drawn: list[str] = []
         key_file = self.folder / KEY_FILE
