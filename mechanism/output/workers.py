@@ -17,6 +17,7 @@ single CPU, or no fork) does everything in-process.
 from __future__ import annotations
 
 import contextlib
+import gc
 import importlib
 import multiprocessing
 import os
@@ -249,6 +250,8 @@ class ForkedSaves:
             with contextlib.suppress(Exception):
                 stream.flush()
         r, w = os.pipe()
+        pid = -1
+        gc.freeze()   # the objects so far out of the collector's reach: a child's collections copy none of their pages
         try:
             pid = os.fork()
         except OSError:
@@ -256,6 +259,9 @@ class ForkedSaves:
             os.close(w)
             self._save(fig, path)
             return
+        finally:
+            if pid != 0:
+                gc.unfreeze()
         if pid == 0:   # the child: save, report an error on the pipe, end without Python's clean-up
             code = 0
             try:
