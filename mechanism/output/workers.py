@@ -17,12 +17,17 @@ single CPU, or no fork) does everything in-process.
 from __future__ import annotations
 
 import contextlib
+import gc
 import importlib
 import multiprocessing
 import os
 import signal
 import sys
 import threading
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
 
 #: the figures each of two workers draws: about equal drawing times (a 2-revolution run with its ideal
 #: counterpart, best of 3: joint force 0.45 s, slider acceleration 0.22, energy 0.17, eccentricity 0.10 against
@@ -215,4 +220,92 @@ class OutputWorkers:
 
     def __exit__(self, *exc):
         self.close()
+        return False
+
+
+class ForkedSaves:
+    """Figures written by forked child processes while this one builds the next (``reproduce``'s report).
+
+    A child inherits the built figure by the fork (copy-on-write: nothing is pickled), draws and writes it
+    (``save(fig, path)`` runs there), and ends with ``os._exit`` (no atexit handlers, no stdio buffers flushed
+    twice). At most ``n`` children run at once; ``wait`` reaps them all and raises the first child's error as a
+    RuntimeError with its traceback (its file is left as it was: the saves write atomically). ``n`` 0, no fork,
+    or a process with other threads (a fork copies only the calling one) saves in-process."""
+
+    def __init__(self, n: int, save: Callable[[Any, Path], None]):
+        forks = hasattr(os, "fork") and threading.active_count() == 1
+        self.n = n if forks else 0
+        self._save = save
+        self._children: list[tuple[int, int, Path]] = []    # (pid, read end of its error pipe, path)
+        self._errors: list[str] = []
+
+    def submit(self, fig, path: Path) -> None:
+        """Write ``fig`` to ``path`` (``save``) in a child, or here when no child can run it."""
+        if self.n <= 0:
+            self._save(fig, path)
+            return
+        while len(self._children) >= self.n:
+            self._reap(0)
+        for stream in (sys.stdout, sys.stderr):   # nothing buffered twice
+            with contextlib.suppress(Exception):
+                stream.flush()
+        r, w = os.pipe()
+        pid = -1
+        gc.freeze()   # the objects so far out of the collector's reach: a child's collections copy none of their pages
+        try:
+            pid = os.fork()
+        except OSError:
+            os.close(r)
+            os.close(w)
+            self._save(fig, path)
+            return
+        finally:
+            if pid != 0:
+                gc.unfreeze()
+        if pid == 0:   # the child: save, report an error on the pipe, end without Python's clean-up
+            code = 0
+            try:
+                os.close(r)
+                self._save(fig, path)
+            except BaseException:   # noqa: BLE001 - reported to the parent
+                code = 1
+                with contextlib.suppress(Exception):
+                    os.write(w, traceback.format_exc().encode(errors="replace")[-60000:])
+            finally:
+                os._exit(code)
+        os.close(w)
+        self._children.append((pid, r, Path(path)))
+
+    def _reap(self, k: int) -> None:
+        """Wait for child ``k`` (its entry stays until it is reaped: an interrupt here leaves no zombie behind
+        the next ``wait``)."""
+        pid, r, path = self._children[k]
+        chunks = []
+        while chunk := os.read(r, 65536):
+            chunks.append(chunk)
+        _, status = os.waitpid(pid, 0)
+        del self._children[k]
+        os.close(r)
+        message = b"".join(chunks).decode(errors="replace")
+        if status != 0:
+            self._errors.append(f"writing {path.name} failed (exit code {os.waitstatus_to_exitcode(status)}):\n"
+                                + message)
+
+    def wait(self) -> None:
+        """Reap every child; a RuntimeError if any failed (after all have ended)."""
+        while self._children:
+            self._reap(0)
+        errors, self._errors = self._errors, []
+        if errors:
+            raise RuntimeError("\n".join(errors))
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        try:
+            self.wait()
+        except RuntimeError:
+            if exc[0] is None:
+                raise
         return False

@@ -8,7 +8,12 @@ own numbers (axis ranges of its figures, converted from its kg-mm-s units) are t
 
 The report is one ``Report`` assembled from mixins: ``SpeedFigures`` (Fig. 11-19), ``DesignFigures``
 (Fig. 20-25), ``Sections`` (runs, units, stiffness variant, modelling choices) and ``LifeSection``
-(bearing rating life per operating point)."""
+(bearing rating life per operating point).
+
+The figures are written by ``drawing.FigureFiles``: in forked processes while the text is assembled, and not
+at all when the folder's figures were drawn from the same inputs (``drawing.inputs_key``: the runs' samples and
+meta, the drawing code, the package versions). So ``--force`` recomputes every run, and the figures are drawn
+again exactly when a recomputed run (or the code that draws) came out different."""
 from __future__ import annotations
 
 import time
@@ -21,7 +26,7 @@ matplotlib.use("Agg")
 from mechanism.cosim.record import RunResult  # noqa: E402
 from mechanism.output.plots import crank_pi  # noqa: E402
 from mechanism.studies.reproduce.analysis import (figures_of)  # noqa: E402
-from mechanism.studies.reproduce.drawing import four_panels, pi_axis  # noqa: E402
+from mechanism.studies.reproduce.drawing import FigureFiles, four_panels, inputs_key, pi_axis  # noqa: E402
 from mechanism.studies.reproduce.cases import (BALL_COUNTS, SPEEDS, STUDY_RPM, paper_stiffness)  # noqa: E402
 from mechanism.studies.reproduce.figures_design import (DesignFigures)  # noqa: E402
 from mechanism.studies.reproduce.figures_speed import (SpeedFigures)  # noqa: E402
@@ -115,8 +120,11 @@ class Report(SpeedFigures, DesignFigures, Sections, LifeSection):
         w()
         w("\n".join(criteria_lines()))
         summary_at = len(self.lines)          # the verdict table goes here once every figure has its verdict
-        for section in self.sections():
-            section()
+        # the figures are drawn in forked processes while the text goes on (all complete when the block ends);
+        # a figure drawn from the same inputs before is not drawn again
+        with FigureFiles(self.fig_dir, inputs_key(self.runs, self.outcome.get("code_version", ""))):
+            for section in self.sections():
+                section()
         if self.missing:
             w("## Missing runs")
             w()
