@@ -22,7 +22,8 @@ FMU path) and the *code version*: SHA-256 over the source of every ``*.py`` file
 that ``mechanism/run.py`` imports directly or indirectly (found by parsing their import
 statements; ``plots``, ``cli`` and ``studies`` only present results and are left out), and the
 versions of numpy, scipy, fmpy and pythonfmu.  So a run is recomputed exactly when its inputs or the code that
-computes it change; ``--force`` recomputes everything.  The FMUs are built from the current
+computes it change; ``--force`` recomputes every run; a figure is drawn again only if
+the data it shows or the drawing code changed (``report/figures/.inputs-key``).  The FMUs are built from the current
 sources into ``DIR/fmu/`` (whenever the code version changed), never taken from a possibly stale
 ``dist/``.  Then ``report`` draws the figures and writes ``DIR/report/README.md``.
 
