@@ -174,3 +174,32 @@ def test_fmi3_runs_the_python_loop(monkeypatch, tmp_path_factory):
     fmu3 = built_fmu("BallBearing3", tmp_path_factory)
     result, used = _run(_cosim(fmu3, rpm=1200, revs=0.005), True, monkeypatch)
     assert result.ok and not used and math.isfinite(result.meta["component_calls"])
+
+
+@pytest.mark.parametrize("step, revs, balls", [(1e-4, 0.1, 8), (5e-6, 0.02, 20)])
+def test_law_model_through_the_fmu(ball_bearing_fmu, step, revs, balls, states, monkeypatch):
+    """``law-model`` (the law from the energy account's bearing, the FMU the authority at the step's ends) against
+    the Python loop's ``LawModel.force`` with the kernels' mechanism (``law_model_reference``): bit-identical, the
+    iterated steps' FMU states all freed."""
+    from law_model_reference import kernel_mechanism
+    kernel_mechanism(monkeypatch)
+    settings = {"damping_model": 1, "damping_coefficient": 50, "n_balls": balls}
+    if balls > 8:
+        settings["allow_ball_overlap"] = True
+    ref, _, loop = _compare(_cosim(ball_bearing_fmu, rpm=1200, revs=revs, step=step, output_interval=step,
+                                   scheme="law-model", settings=settings), monkeypatch)
+    steps = round(revs * 0.05 / step)
+    assert ref.meta["iteration_passes_max"] >= 2 and loop.states == (steps, steps) and loop.law_model
+    assert (states.taken, states.freed, states.live, states.errors) == (steps, steps, set(), [])
+
+
+def test_law_model_failure_through_the_fmu(ball_bearing_fmu, states, monkeypatch):
+    """A law-model run the FMU stops (|e| beyond its limit): the same failure and rows, every state freed."""
+    from law_model_reference import kernel_mechanism
+    kernel_mechanism(monkeypatch)
+    ref, new, loop = _compare(_cosim(ball_bearing_fmu, rpm=1200, revs=0.1, step=1e-4, scheme="law-model",
+                                     settings={"eccentricity_limit": 1.5e-5}), monkeypatch)
+    failure = ref.meta["failure"]
+    assert ref.status == "failed" and new.meta["failure"] == failure and "eccentricity_limit" in failure["cause"]
+    assert loop.states[0] == loop.states[1] == failure["step"]
+    assert (states.taken, states.freed, states.live, states.errors) == (failure["step"],) * 2 + (set(), [])

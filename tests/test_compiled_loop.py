@@ -253,3 +253,54 @@ def test_substeps_match_the_masters_for_huge_tangents():
         arr = np.array([x.t, x.e_x, x.e_y, x.v_x, x.v_y, x.F_x, x.F_y, x.k_xx, x.k_xy, x.k_yy, x.c_xx, x.c_xy, x.c_yy])
         for h in (1e-6, 1e-5, 1e-4, 1e20):
             assert cl.substeps(h, arr, 3.0, 1.0, 64) == substeps(h, x, 3.0, 1.0, 64), (k, h)
+
+
+@pytest.mark.parametrize("step, revs, balls", [(1e-4, 0.2, 8), (5e-6, 0.02, 20)])
+def test_law_model_bit_for_bit(step, revs, balls, monkeypatch):
+    """``law-model`` (``law_model_kernel``) against the Python loop's ``LawModel.force`` with the kernels' mechanism
+    (``law_model_reference.kernel_mechanism``): bit-identical samples and meta, at the coarse step (contact onsets,
+    substeps from the law's tangent, onset corrections) and at the default step with 20 balls."""
+    from law_model_reference import kernel_mechanism
+    kernel_mechanism(monkeypatch)
+    settings = {"damping_model": 1, "damping_coefficient": 50.0, "n_balls": balls}
+    if balls > 8:
+        settings["allow_ball_overlap"] = True
+    ref, new = _compare(RunConfig(mode="inprocess", rpm=1200, revs=revs, step=step, output_interval=step,
+                                  scheme="law-model", settings=settings, progress=False), monkeypatch)
+    for k, column in enumerate(ref.columns):
+        np.testing.assert_array_equal(new.data[:, k], ref.data[:, k], err_msg=column)
+    assert new.meta == ref.meta
+    assert ref.meta["scheme"] == "law-model" and ref.meta["iteration_passes_max"] >= 2
+    if step == 1e-4:
+        assert ref.meta["substeps_max"] > 1 and ref.has("ball_load_8")
+
+
+def test_law_model_against_the_numpy_reference(monkeypatch):
+    """``law-model`` compiled against the unpatched Python loop (its NumPy mechanism: other rounding), 0.1 rev at
+    1e-4 s: every column within 1e-9 of its largest magnitude (the constraint violation, a rounding-level figure,
+    within 1e-14 m; the energy residual, a difference of the energies, within 1e-9 of the kinetic energy), the same
+    passes and substeps."""
+    config = RunConfig(mode="inprocess", rpm=1200, revs=0.1, step=1e-4, output_interval=1e-4, scheme="law-model",
+                       settings={"damping_model": 1, "damping_coefficient": 50.0}, progress=False)
+    ref, n_ref = _run(config, False, monkeypatch)
+    new, n_new = _run(config, True, monkeypatch)
+    assert n_ref == 0 and n_new > 0 and ref.ok and new.ok and new.columns == ref.columns
+    for k, column in enumerate(ref.columns):
+        a, b = ref.data[:, k], new.data[:, k]
+        floor = {"constraint_violation": 1e-14,
+                 "energy_residual": 1e-9 * np.max(np.abs(ref["kinetic_energy"]))}.get(column, 0.0)
+        assert np.max(np.abs(a - b)) <= 1e-9 * np.max(np.abs(a)) + floor, column
+    for key in ("substeps_max", "substeps_total", "iteration_passes_mean", "iteration_passes_max",
+                "iteration_not_converged", "component_calls"):
+        assert new.meta[key] == ref.meta[key], key
+
+
+def test_law_model_failure_is_reported_alike(monkeypatch):
+    """A law-model run stopped by the component (|e| beyond the limit): same step, time, cause and rows."""
+    from law_model_reference import kernel_mechanism
+    kernel_mechanism(monkeypatch)
+    ref, new = _compare(RunConfig(mode="inprocess", rpm=1200, revs=0.1, step=1e-4, scheme="law-model",
+                                  settings={"eccentricity_limit": 1.5e-5}, progress=False), monkeypatch)
+    assert ref.status == "failed" and "eccentricity" in ref.meta["failure"]["cause"]
+    assert new.meta["failure"] == ref.meta["failure"]
+    np.testing.assert_array_equal(new.data, ref.data)

@@ -29,9 +29,9 @@ from mechanism.cosim.energy import ENERGY_COLUMNS
 from mechanism.cosim.law_kernel import pack_bearing
 
 #: the schemes the compiled loop implements (their force models: ``compiled_loop.drift_model``, ``trial_model``,
-#: ``hold_model``)
+#: ``hold_model``; ``law-model``'s: ``law_model_kernel``, ``jacobian-implicit``'s without a law)
 SCHEMES = ("jacobian", "jacobian-drift", "jacobian-secant", "jacobian-implicit", "zoh", "extrap1", "extrap2",
-           "zoh-jacobi")
+           "zoh-jacobi", "law-model")
 
 
 #: what the compiled loop calls of the FMU's (a handle without one of them: the Python loop runs)
@@ -110,6 +110,7 @@ def eligible(loop) -> bool:
     return bool(getattr(loop.settings, "compiled_loop", False) and loop.kernels and loop._observe_in_kernel
                 and loop.link is not None and component_kind(loop.endpoint) is not None
                 and scheme is not None and scheme.name in SCHEMES
+                and (getattr(scheme, "law", None) is None or scheme.law is loop.contact_law)   # law-model's is PC
                 and (loop.energy is None or loop.integrals is not None)
                 and loop.settings.substep_limit > 0)   # else the Python loop reports the setting's error at its step
 
@@ -156,6 +157,10 @@ class CompiledLoop:
         else:
             self.PE = self.P
         fset[13] = endpoint.bearing.eccentricity_limit if self.kind == cc.IN_PROCESS else math.inf
+        # law-model with its law (bound at ``CouplingLoop.start``: the contact law, ``PC``); without, jacobian-implicit
+        self.law_model = bool(getattr(scheme, "uses_law", False) and getattr(scheme, "law", None) is not None)
+        if self.law_model:
+            fset[14] = scheme.resolution
         self.fset = fset
         iset = np.zeros(cl.N_ISET, np.int64)
         iset[0:10] = (settings.max_substeps, max(2, settings.max_iterations), settings.iterate_where_needed,
@@ -168,6 +173,8 @@ class CompiledLoop:
         iset[15] = scheme.ordering == "jacobi"
         iset[16] = scheme.history
         iset[17] = last_step
+        iset[18] = self.law_model
+        iset[19] = self.law_model and scheme.onset_correction
         self.past = np.zeros((3, 13))
         for k, x in enumerate(scheme.past):
             self.past[k] = (x.t, x.e_x, x.e_y, x.v_x, x.v_y, x.F_x, x.F_y, x.k_xx, x.k_xy, x.k_yy, x.c_xx,

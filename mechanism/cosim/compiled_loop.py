@@ -35,6 +35,7 @@ from numba import njit
 
 from fmu_bearing.parameters import DAMPING_CONSTANT
 from mechanism.cosim import component_call as cc
+from mechanism.cosim import law_model_kernel as lmk
 from mechanism.cosim.energy_kernel import stage_integrals
 from mechanism.cosim.law_kernel import elastic_energy
 from mechanism.multibody.kernels import advance, finish, force_of_model
@@ -50,13 +51,14 @@ DO_STEP, GET_STATE, SET_STATE, FREE_STATE, SAMPLE = 0, 1, 2, 3, 4
 N_COUNTS = 11
 #: float settings (``fset``): mobility, substep limit, max constraint violation, iteration tol, cv (in/out),
 #: contact law: cage start, journal and housing angle at t = 0; energy: start energy, stage cage offset,
-#: cage start, journal and housing angle at t = 0; eccentricity limit
-N_FSET = 14
+#: cage start, journal and housing angle at t = 0; eccentricity limit; law-model: ``resolution``
+N_FSET = 15
 #: int settings (``iset``): max substeps, pass limit, predict, iterative, secant, energy, theta_j, theta_i,
 #: contact law present, constraints (m), end evaluation valid (in/out), component kind (``component_call``),
 #: drift history, entries of past (in/out), force model (``MODELS``), Jacobi ordering, the scheme's history,
-#: the run's last step (always recorded, also off the output stride)
-N_ISET = 18
+#: the run's last step (always recorded, also off the output stride), the law-model scheme (its law: ``PC``), its
+#: onset corrections on
+N_ISET = 20
 #: force models (iset[14]): the interface-Jacobian ones (``drift_model``, ``trial_model``), ``hold_model``'s
 MODELS = {"jacobian": 0, "zoh": 1, "extrap1": 2, "extrap2": 3}
 
@@ -308,6 +310,14 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
     model, jacobi, history = iset[14], iset[15] != 0, iset[16]
     nb_c = int(PC[0]) if PC.shape[0] > 0 else 0
     jumps = np.zeros((max(nb_c, 1), 3))
+    lawm, onset_corr = iset[18] != 0, iset[19] != 0    # law-model (law_model_kernel): its state and work arrays
+    LM = np.zeros(lmk.LM_SIZE)
+    LM[18] = fset[14]
+    lout = np.zeros(10)
+    lloads = np.zeros(max(nb_c, 1))
+    onsets = np.zeros((max(max_sub, 1), 3))
+    bounds = np.zeros((max(max_sub, 1) + 1, 4))
+    xs = np.zeros(13)
     trial_jumps = np.zeros((max(nb_c, 1), 3))
     fm = np.zeros(17)
     x = np.zeros(13)
@@ -331,6 +341,8 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
         cage_start = 0.0
         if has_law:   # energy.kinematic_cage_angle
             cage_start = fset[5] + ((y[tj] - fset[6]) * PC[11] + (y[ti] - fset[7]) * PC[12])
+        if lawm:
+            lmk.set_cage(LM, PC, cage_start, xin[4], xin[5])
         snap_npast = npast
         state = 0
         if iterative:
@@ -358,22 +370,37 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                     if iterative:    # no iterative Jacobi scheme today; free the step's state as every exit does
                         _release(kind, H, state, counts)
                     return y
-            if model != 0:
-                hold_model(model, past, npast, fm)
-            elif have_trial:
-                trial_model(past[npast - 1], trial, trial_jumps, ntrial, fm)
+            if lawm:   # LawModel.begin_step, substep_tangent, set_substeps
+                lmk.begin(LM, PC, lout, lloads, past[npast - 1], trial, have_trial, h)
+                lmk.substep_tangent(LM, past[npast - 1], xs)
+                m = substeps(h, xs, mobility, sub_limit, max_sub)
+                if onset_corr and have_trial and int(LM[17]) == m:
+                    lmk.onset_corrections(LM, PC, m, bounds, trial, onsets)
+                else:
+                    for k in range(m):
+                        onsets[k, 2] = 0.0
+                LM[17] = m
             else:
-                drift_model(past, npast, drift_history, fm)
-            m = substeps(h, past[npast - 1], mobility, sub_limit, max_sub) if model == 0 else 1
+                if model != 0:
+                    hold_model(model, past, npast, fm)
+                elif have_trial:
+                    trial_model(past[npast - 1], trial, trial_jumps, ntrial, fm)
+                else:
+                    drift_model(past, npast, drift_history, fm)
+                m = substeps(h, past[npast - 1], mobility, sub_limit, max_sub) if model == 0 else 1
             counts[0] = max(counts[0], m)
             counts[1] += m
             hs = h / m
-            k1v = iset[10] != 0 and k1_valid(fm, t0, xin, xf)
             # with the account's arrays also without an account (one specialisation to compile): the powers and
             # stages are computed and not used, the state and the inputs are the same
             for i in range(acc.shape[0]):
                 acc[i] = 0.0
-            y_end, drift, finite = advance(y, t0, hs, m, t, fm, dy, k1v, I, R, L, LR, W, u, acc, p1, stages)
+            if lawm:
+                y_end, drift, finite = lmk.advance(y, t0, hs, m, t, LM, PC, lout, lloads, onsets, bounds, I, R, L,
+                                                   LR, W, u, acc, p1, stages)
+            else:
+                k1v = iset[10] != 0 and k1_valid(fm, t0, xin, xf)
+                y_end, drift, finite = advance(y, t0, hs, m, t, fm, dy, k1v, I, R, L, LR, W, u, acc, p1, stages)
             if not finite:
                 _fail(fail, np.int64(NOT_FINITE), step, t, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
                 if iterative:
@@ -424,10 +451,10 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                 counts[5] += 1
                 break
             nj = np.int64(0)
-            if has_law:
+            if has_law and not lawm:   # law-model: no onset jumps, no prediction (its force_model is None)
                 cage_end = fset[5] + ((y_end[tj] - fset[6]) * PC[11] + (y_end[ti] - fset[7]) * PC[12])
                 nj = onset_jumps(PC, start, cage_start, end, cage_end, jumps)
-            if predict and ((nj == 0) if passes == 1 else same_jumps(jumps, nj, trial_jumps, ntrial)) \
+            if predict and not lawm and ((nj == 0) if passes == 1 else same_jumps(jumps, nj, trial_jumps, ntrial)) \
                     and next_pass_negligible(fm, end, mobility, h, tol):
                 counts[6] += 1
                 break

@@ -481,6 +481,29 @@ def rhs(tau, y, fm, I, R, L, LR, W, u, dy):
 
 
 @njit(cache=True)
+def stage_inputs(y, I, R, L, LR, W, u):
+    """The first half of ``rhs`` for a force given by the caller (``mechanism.cosim.law_model_kernel``): the
+    rotations and Q^A of y into W and its bearing inputs into u (eq. 10-12)."""
+    _rotations(y, I, W)
+    _applied(I, R, W)
+    if L[0] == 1:
+        _link_inputs(y, I, L, LR, W, u)
+
+
+@njit(cache=True)
+def stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy):
+    """The second half of ``rhs`` after ``stage_inputs``: dy/dt = [qd, qdd] with the force joint's force (fx, fy)
+    at the inputs u (eq. 20-23), the same arithmetic as ``rhs``."""
+    n = I[1]
+    if L[0] == 1:
+        _add_link_force(y, I, L, LR, W, u[0], u[1], fx, fy)
+    for i in range(n):
+        dy[i] = y[n + i]
+    _kinematics(y, tau, I, R, W)
+    _solve(y, I, R, W, dy)
+
+
+@njit(cache=True)
 def powers(y, I, R, W):
     """The powers [W] at the state y whose right-hand side was just evaluated (kinematics, lambda and Q in W):
     of the drivers lambda . Phi_t (the rheonomic constraints' work, e.g. the crank's M omega), of the applied

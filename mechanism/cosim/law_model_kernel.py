@@ -1,0 +1,200 @@
+"""The ``law-model`` coupling's step compiled (numba), for the compiled loop (``compiled_loop.run_steps``).
+
+A second implementation of ``mechanism.cosim.coupling.law_model.LawModel`` (its Python path, ``force`` called
+by the master's RK4, is the reference; tests/test_compiled_loop.py and tests/test_compiled_cosim.py hold the
+compiled loop's law-model runs against it) with the same arithmetic and order:
+
+    F(tau, e, v) = F_law(e, v; phi_n + omega_m s) + g_k + c_n + (c* - c_n) s / h,   s = tau - t_n
+
+F_law: eq. (18)-(19) (``law_kernel.evaluate``); omega_m: eq. (16) of the ring speeds at t_n; c_n, c*: the
+component's force at both ends against the law (``begin``); g_k: the onset correction of substep k
+(``onset_corrections``); the substeps from the stiffest law tangent met in the step (``substep_tangent``).
+
+The scheme's state is one float64 array ``LM`` (layout ``LM_FIELDS``), the onset corrections an (m x 3) array
+(g_x, g_y, present) and the substep-start states of the pass an ((m + 1) x 4) array ``bounds`` (e_x, e_y, v_x,
+v_y): the next pass's onset corrections are built from them.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from fmu_bearing.parameters import DAMPING_CONSTANT
+from mechanism.cosim.law_kernel import evaluate
+from mechanism.multibody.kernels import (
+    _layout,
+    _link_inputs,
+    _rotations,
+    _stage_row,
+    max_violation,
+    powers,
+    prepare,
+    stage_derivative,
+    stage_inputs,
+)
+
+#: ``LM``: t_n, h, phi_n, omega_m, omega_inner and omega_outer at t_n, c_n (2), c* (2), the stiffest tangent's
+#: largest eigenvalue and its K, C (6), the substeps of the last pass, ``resolution``
+LM_FIELDS = ("t", "h", "cage", "omega", "wi", "wo", "c0_x", "c0_y", "c1_x", "c1_y", "k_seen",
+             "k_xx", "k_xy", "k_yy", "c_xx", "c_xy", "c_yy", "m", "resolution")
+LM_SIZE = len(LM_FIELDS)
+
+
+@njit(cache=True)
+def _eig_max(a, b, c):
+    """Largest eigenvalue of [[a, b], [b, c]] (``law_model._eig_max``)."""
+    return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
+
+
+@njit(cache=True)
+def law(LM, P, out, loads, s, e_x, e_y, v_x, v_y):
+    """``LawModel._law``: F_law(e, v; phi_n + omega_m s) [N] (eq. 18-19) into out; keeps the stiffest tangent."""
+    evaluate(P, e_x, e_y, v_x, v_y, LM[2] + LM[3] * s, LM[4], LM[5], out, loads)
+    k = _eig_max(out[2], out[3], out[4])
+    if k > LM[10]:
+        LM[10] = k
+        for i in range(6):
+            LM[11 + i] = out[2 + i]
+    return out[0], out[1]
+
+
+@njit(cache=True)
+def set_cage(LM, P, cage, omega_inner, omega_outer):
+    """``LawModel.set_cage``: phi_n [rad], omega_m (eq. 16) and the ring speeds [rad/s] at t_n."""
+    LM[2] = cage
+    LM[3] = omega_inner * P[11] + omega_outer * P[12]
+    LM[4], LM[5] = omega_inner, omega_outer
+
+
+@njit(cache=True)
+def begin(LM, P, out, loads, a, x, have_trial, h):
+    """``LawModel.begin_step`` from the start exchange a (13 fields of ``Exchanged``) and, if ``have_trial``, the
+    last pass's end exchange x: a new step's stiffest tangent (the start's, the law at the predicted end), c_n
+    and c* (c_n on the first pass)."""
+    if not have_trial:
+        LM[10] = _eig_max(a[7], a[8], a[9])
+        for i in range(6):
+            LM[11 + i] = a[7 + i]
+        law(LM, P, out, loads, h, a[1] + h * a[3], a[2] + h * a[4], a[3], a[4])
+    fx, fy = law(LM, P, out, loads, 0.0, a[1], a[2], a[3], a[4])
+    LM[0] = a[0]
+    LM[6], LM[7] = a[5] - fx, a[6] - fy
+    if not have_trial:
+        LM[8], LM[9] = LM[6], LM[7]
+    else:
+        fx, fy = law(LM, P, out, loads, x[0] - a[0], x[1], x[2], x[3], x[4])
+        LM[8], LM[9] = x[5] - fx, x[6] - fy
+    LM[1] = h
+
+
+@njit(cache=True)
+def substep_tangent(LM, a, xs):
+    """``LawModel.substep_tangent`` into xs: the start exchange a with the stiffest tangent met, K scaled by
+    ``resolution``^2 and C by ``resolution``."""
+    r = LM[18]
+    r2 = r * r
+    for i in range(7):
+        xs[i] = a[i]
+    for i in range(3):
+        xs[7 + i] = r2 * LM[11 + i]
+        xs[10 + i] = r * LM[14 + i]
+
+
+@njit(cache=True)
+def onset_corrections(LM, P, m, bounds, end, onsets):
+    """``LawModel._onset_corrections`` into onsets[:m] (g_x, g_y, present): per substep the constant force that
+    gives RK4 each contact onset's exact damping impulse (eq. 18), from the last pass's substep starts
+    ``bounds`` and its end exchange ``end``."""
+    for k in range(m):
+        onsets[k, 0] = onsets[k, 1] = onsets[k, 2] = 0.0
+    if int(P[3]) != DAMPING_CONSTANT or P[4] == 0.0:
+        return
+    nb = int(P[0])
+    C, half, hs = P[4], P[2], LM[1] / m
+    spacing = 2.0 * math.pi / nb
+    for k in range(m):
+        if k + 1 < m:
+            bx, by, bvx, bvy = bounds[k + 1, 0], bounds[k + 1, 1], bounds[k + 1, 2], bounds[k + 1, 3]
+        else:
+            bx, by, bvx, bvy = end[1], end[2], end[3], end[4]
+        ax, ay, avx, avy = bounds[k, 0], bounds[k, 1], bounds[k, 2], bounds[k, 3]
+        pa, pb = LM[2] + LM[3] * k * hs, LM[2] + LM[3] * (k + 1) * hs
+        gx = gy = 0.0
+        for r in range(nb):
+            ca, sa = math.cos(pa + r * spacing), math.sin(pa + r * spacing)
+            cb, sb = math.cos(pb + r * spacing), math.sin(pb + r * spacing)
+            da, db = ax * ca + ay * sa - half, bx * cb + by * sb - half
+            if not (da <= 0.0 and 0.0 < db):
+                continue
+            theta = da / (da - db)
+            phi = pa + r * spacing + theta * (pb - pa)
+            ux, uy = math.cos(phi), math.sin(phi)
+            vr = (avx + theta * (bvx - avx)) * ux + (avy + theta * (bvy - avy)) * uy
+            w = (1.0 - theta) - (1.0 / 6.0 + (2.0 / 3.0 if theta < 0.5 else 0.0))
+            g = C * max(vr, 0.0) * w
+            gx, gy = gx + g * ux, gy + g * uy
+        if gx != 0.0 or gy != 0.0:
+            onsets[k, 0], onsets[k, 1], onsets[k, 2] = gx, gy, 1.0
+
+
+@njit(cache=True)
+def force(LM, P, out, loads, onsets, bounds, tau, e_x, e_y, v_x, v_y, sub, stage):
+    """``LawModel.force`` at RK4 stage ``stage`` of substep ``sub``: the law, the onset correction, the ramp of
+    the end corrections; records the substep's start state (stage 0)."""
+    s = tau - LM[0]
+    fx, fy = law(LM, P, out, loads, s, e_x, e_y, v_x, v_y)
+    if stage == 0:
+        bounds[sub, 0], bounds[sub, 1], bounds[sub, 2], bounds[sub, 3] = e_x, e_y, v_x, v_y
+    if onsets[sub, 2] != 0.0:
+        fx, fy = fx + onsets[sub, 0], fy + onsets[sub, 1]
+    r = s / LM[1]
+    return fx + LM[6] + r * (LM[8] - LM[6]), fy + LM[7] + r * (LM[9] - LM[7])
+
+
+@njit(cache=True)
+def advance(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R, L, LR, W, u, acc, p1, stages):
+    """``kernels.advance`` (same arithmetic, the energy account's stages and powers) with the law-model's force
+    at every stage, the first included (the master's RK4 calls ``force`` four times per substep)."""
+    N = y.shape[0]
+    ork = _layout(I)[9]                  # in W: the four stages' dy/dt, the stage state, the stages' powers
+    yt = W[ork + 4 * N:ork + 5 * N]
+    opw = ork + 5 * N
+    y = y.copy()
+    h2 = 0.5 * hs
+    nb = I[0]
+    for sub in range(substeps):
+        t = t0 + sub * hs
+        for st in range(4):
+            k = W[ork + st * N:ork + (st + 1) * N]
+            if st == 0:
+                ts = t
+                for i in range(N):
+                    yt[i] = y[i]
+            else:
+                cs = h2 if st < 3 else hs                  # y + h/2 k1, y + h/2 k2, y + h k3
+                ts = t + cs
+                o = ork + (st - 1) * N
+                for i in range(N):
+                    yt[i] = y[i] + cs * W[o + i]
+            stage_inputs(yt, I, R, L, LR, W, u)
+            fx, fy = force(LM, P, out, loads, onsets, bounds, ts, u[0], u[1], u[2], u[3], sub, st)
+            stage_derivative(ts, yt, fx, fy, I, R, L, LR, W, u, k)
+            o = opw + 3 * st
+            W[o], W[o + 1], W[o + 2] = powers(yt, I, R, W)
+            _stage_row(stages, 5 * sub + st, yt, u, nb, L)
+        c = hs / 6.0
+        for i in range(N):
+            y[i] = y[i] + c * (W[ork + i] + 2.0 * (W[ork + N + i] + W[ork + 2 * N + i]) + W[ork + 3 * N + i])
+        for j in range(3):
+            acc[j] += c * (W[opw + j] + 2.0 * (W[opw + 3 + j] + W[opw + 6 + j]) + W[opw + 9 + j])
+        if L[0] == 1:
+            _rotations(y, I, W)
+            _link_inputs(y, I, L, LR, W, u)
+        _stage_row(stages, 5 * sub + 4, y, u, nb, L)
+    for i in range(N):
+        if not math.isfinite(y[i]):
+            return y, math.nan, False
+    prepare(y, t_end, I, R, L, LR, W, u)
+    return y, max_violation(I, W), True
+
