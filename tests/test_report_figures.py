@@ -27,31 +27,58 @@ def _run(scale: float = 1.0) -> RunResult:
     return RunResult(["time", "F_x"], np.column_stack([t, scale * np.cos(t)]), {"config": {"rpm": 1200.0}})
 
 
+def _in_a_fresh_process(body: str, tmp_path) -> None:
+    """Run ``body`` (test code with ``tmp_path``) in a new interpreter: ``ForkedSaves`` forks only from a
+    process with one thread, and the test session has others by now (tqdm's monitor, earlier tests' pools)."""
+    import subprocess
+    import sys
+    import textwrap
+    code = textwrap.dedent('''
+        import os, pathlib
+        import numpy as np
+        import pytest
+        from mechanism.output.workers import ForkedSaves
+        from mechanism.studies.reproduce import drawing
+        from tests.test_report_figures import _figure
+        tmp_path = pathlib.Path(os.environ["FIGURE_TEST_DIR"])
+    ''') + textwrap.dedent(body)
+    env = dict(os.environ, FIGURE_TEST_DIR=str(tmp_path), MPLBACKEND="Agg")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+
+
 def test_forked_figures_are_the_in_process_bytes(tmp_path):
-    drawing.draw_figure(_figure(), tmp_path / "here.png")
-    with ForkedSaves(2, drawing.draw_figure) as saves:
-        assert saves.n == 2
+    _in_a_fresh_process('''
+        drawing.draw_figure(_figure(), tmp_path / "here.png")
+        with ForkedSaves(2, drawing.draw_figure) as saves:
+            assert saves.n == 2
+            for k in range(3):
+                saves.submit(_figure(), tmp_path / f"forked{k}.png")
+        here = (tmp_path / "here.png").read_bytes()
         for k in range(3):
-            saves.submit(_figure(), tmp_path / f"forked{k}.png")
-    here = (tmp_path / "here.png").read_bytes()
-    for k in range(3):
-        assert (tmp_path / f"forked{k}.png").read_bytes() == here
+            assert (tmp_path / f"forked{k}.png").read_bytes() == here
+    ''', tmp_path)
 
 
 def test_a_child_error_is_raised_after_every_child_ended(tmp_path):
-    def save(fig, path):
-        if "bad" in path.name:
-            raise ValueError("no such colour")
-        drawing.draw_figure(fig, path)
+    _in_a_fresh_process('''
+        def save(fig, path):
+            if "bad" in path.name:
+                raise ValueError("no such colour")
+            drawing.draw_figure(fig, path)
 
-    saves = ForkedSaves(2, save)
-    saves.submit(_figure(), tmp_path / "bad.png")
-    saves.submit(_figure(), tmp_path / "good.png")
-    with pytest.raises(RuntimeError, match="(?s)bad.png.*no such colour"):
-        saves.wait()
-    assert (tmp_path / "good.png").is_file() and not (tmp_path / "bad.png").exists()
-    assert not [p for p in os.listdir(tmp_path) if p.endswith(".tmp.png")]
-    saves.wait()   # nothing left: no error twice
+        saves = ForkedSaves(2, save)
+        assert saves.n == 2
+        saves.submit(_figure(), tmp_path / "bad.png")
+        saves.submit(_figure(), tmp_path / "good.png")
+        with pytest.raises(RuntimeError, match="(?s)bad.png.*no such colour"):
+            saves.wait()
+        assert (tmp_path / "good.png").is_file() and not (tmp_path / "bad.png").exists()
+        assert not [p for p in os.listdir(tmp_path) if p.endswith(".tmp.png")]
+        saves.wait()   # nothing left: no error twice
+    ''', tmp_path)
 
 
 def test_no_fork_with_other_threads_or_n_zero(tmp_path):
