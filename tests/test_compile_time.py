@@ -71,7 +71,8 @@ def test_warmup_compiles_what_run_steps_calls(tmp_path):
     out = subprocess.run([sys.executable, "-c", _COMPILED_IN_RUN], env=env, cwd=ROOT, capture_output=True,
                          text=True, check=True).stdout.split()
     loop_side = ("mechanism.cosim.compiled_loop.", "mechanism.cosim.component_call.",
-                 "mechanism.cosim.component_kernel.", "mechanism.cosim.fmu_native.", "mechanism.cosim.law_kernel.")
+                 "mechanism.cosim.component_kernel.", "mechanism.cosim.fmu_native.", "mechanism.cosim.law_kernel.",
+                 "mechanism.cosim.law_model_kernel.")
     allowed = {"mechanism.cosim.compiled_loop.run_steps"} | {
         f"{f.py_func.__module__}.{f.py_func.__qualname__}" for f, _ in warmup.RUN_COMPILES}
     compiled_again = {name for name in out if name.startswith(loop_side)} - allowed

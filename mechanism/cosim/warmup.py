@@ -13,6 +13,7 @@ from numba import types
 
 from mechanism.cosim import compiled_loop as cl
 from mechanism.cosim import component_call as cc
+from mechanism.cosim import law_model_kernel as lmk
 from mechanism.cosim.energy_kernel import stage_integrals
 from mechanism.cosim.law_kernel import elastic_energy
 
@@ -41,6 +42,12 @@ SIGNATURES = (
     (cl._fail, (_F1, _I, _I, _F, _F, _F, _F, _F, _F, _F)),
     (cl._copy, (_F1, _F1, _I)),
     (cl._copy_rows, (_F2, _F2, _I)),
+    # law-model's step (law_model_kernel; its RK4 compiles the multibody stage kernels with it)
+    (lmk.set_cage, (_F1, _F1, _F, _F, _F)),
+    (lmk.begin, (_F1, _F1, _F1, _F1, _F1, _F1, _B, _F)),
+    (lmk.substep_tangent, (_F1, _F1, _F1)),
+    (lmk.onset_corrections, (_F1, _F1, _I, _F2, _F1, _F2)),
+    (lmk.advance, (_F1, _F, _F, _I, _F, _F1, _F1, _F1, _F1, _F2, _F2, _I1, _F1, _I1, _F1, _F1, _F1, _F1, _F1, _F2)),
 )
 #: called by the run's process itself before its first chunk (the energy account's set-up): not here
 RUN_COMPILES = ((stage_integrals, (_F1, _F2, _I, _F, _F)), (elastic_energy, (_F1, _F, _F, _F)))
