@@ -168,9 +168,12 @@ def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, 
     draw = plots and len(result["time"]) > 1
     shares = []
     if draw and workers is not None:
+        from mechanism.output.workers import ColumnsOf
         from mechanism.output.workers import shares as shares_of
+        run_sent = ColumnsOf(result, plotted_columns(result))     # only the plotted columns, as raw bytes
+        ideal_sent = None if ideal is None else ColumnsOf(ideal, plotted_columns(ideal))
         shares = [(k, names) for k, names in enumerate(shares_of(len(workers)))
-                  if workers.submit(k, "plots", result, out, ideal, names=names)]
+                  if workers.submit(k, "plots", run_sent, out, ideal_sent, names=names)]
     try:
         figures = _write_tables(result, out, ideal)
     finally:   # the workers' files are complete before anything else happens (an error is raised after)
@@ -194,6 +197,16 @@ def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, 
         plotted.sort(key=lambda path: order[Path(path).name])
     figures["plots"] = [str(p) for p in plotted]   # returned only (summary.json is written before the plots)
     return figures
+
+
+#: the columns ``plots.plot_run`` reads (besides the ball loads): the workers receive only these (issue 11)
+PLOTTED = ("time", "crank_angle", "e_x", "e_y", "slider_a", "crank_moment", "F_x", "F_y", "slider_x",
+           "damping_dissipation", "contact_energy", "cage_work", "energy_residual")
+
+
+def plotted_columns(r: RunResult) -> tuple[str, ...]:
+    """The columns of ``r`` that ``plots.plot_run`` reads (``PLOTTED`` and the ball loads), in ``r``'s order."""
+    return tuple(c for c in r.columns if c in PLOTTED or c.startswith("ball_load_"))
 
 
 def _write_tables(result: RunResult, out: Path, ideal: RunResult | None) -> dict:

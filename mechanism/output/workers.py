@@ -26,8 +26,11 @@ import sys
 import threading
 import traceback
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 #: the figures each of two workers draws: about equal drawing times (a 2-revolution run with its ideal
 #: counterpart, best of 3: joint force 0.45 s, slider acceleration 0.22, energy 0.17, eccentricity 0.10 against
@@ -60,6 +63,62 @@ def _resample(*args):
 JOBS = {"plots": _plots, "resample": _resample}
 
 
+@dataclass(frozen=True)
+class ColumnsOf:
+    """The columns ``names`` of a ``RunResult`` as a job's argument: a worker receives them as a RunResult of
+    those columns, sent one column at a time as raw bytes (``Connection.send_bytes``: no pickled copy of the
+    table in the command, issue 11); a job run in-process gets ``result`` itself."""
+    result: Any
+    names: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class _Columns:
+    """What is pickled of a ``ColumnsOf``; its columns follow the job on the pipe, in this order."""
+    names: tuple[str, ...]
+    rows: int
+    meta: dict
+    status: str
+    message: str
+
+
+def _local(job: str, args: tuple, kwargs: dict):
+    """``job`` run in this process (each ``ColumnsOf`` replaced by its ``RunResult``)."""
+    def own(value):
+        return value.result if isinstance(value, ColumnsOf) else value
+    return JOBS[job](*map(own, args), **{key: own(value) for key, value in kwargs.items()})
+
+
+def _pack(args: tuple, kwargs: dict) -> tuple[tuple, dict, list[np.ndarray]]:
+    """``args`` and ``kwargs`` with each ``ColumnsOf`` replaced by its ``_Columns`` header, and the columns to send."""
+    columns = []
+
+    def header(value):
+        if not isinstance(value, ColumnsOf):
+            return value
+        r = value.result
+        columns.extend(r[name] for name in value.names)
+        return _Columns(tuple(value.names), len(r.data), r.meta, r.status, r.message)
+    return tuple(map(header, args)), {key: header(value) for key, value in kwargs.items()}, columns
+
+
+def _unpack(conn, args: tuple, kwargs: dict) -> tuple[tuple, dict]:
+    """The worker's side of ``_pack``: each ``_Columns`` header made a ``RunResult`` of the columns received
+    (a column-major table: each column is received straight into its place)."""
+    from mechanism.cosim.record import RunResult
+
+    def result(value):
+        if not isinstance(value, _Columns):
+            return value
+        data = np.empty((value.rows, len(value.names)), order="F")
+        for k in range(len(value.names)):
+            size = conn.recv_bytes_into(data[:, k])
+            if size != value.rows * data.itemsize:
+                raise ValueError(f"column {value.names[k]!r}: {size} bytes received, {value.rows * data.itemsize} expected")
+        return RunResult(list(value.names), data, value.meta, value.status, value.message)
+    return tuple(map(result, args)), {key: result(value) for key, value in kwargs.items()}
+
+
 def _forked(conn, ours, modules) -> None:
     """The worker process (forked by ``OutputWorkers``): SIGINT ignored, SIGTERM ends it; the command's end of
     the pipe closed here, so that the command's death is an end of file."""
@@ -85,6 +144,10 @@ def serve(conn, modules) -> None:
         if job is None:
             return
         name, args, kwargs = job
+        try:
+            args, kwargs = _unpack(conn, args, kwargs)
+        except Exception:   # noqa: BLE001 - the pipe is out of step: the worker ends, the command draws in-process
+            return
         try:
             answer = ("ok", JOBS[name](*args, **kwargs))
         except Exception as err:   # noqa: BLE001 - raised again in the command
@@ -121,7 +184,8 @@ class OutputWorkers:
     A worker is forked (``multiprocessing``'s fork context: no helper process such as a resource tracker) when
     the command starts, before the run loads its FMU or compiled kernels (one thread, numba not imported: checked
     when this was written); it inherits the modules imported so far (numpy), so it imports only matplotlib and
-    scipy.interpolate. Jobs and answers are pickled over a pipe."""
+    scipy.interpolate. Jobs and answers are pickled over a pipe, but for the columns of ``ColumnsOf`` arguments
+    (raw bytes)."""
 
     def __init__(self, n: int = 1):
         self._procs, self._conns, self._busy = [], [], []
@@ -153,12 +217,19 @@ class OutputWorkers:
         conn = self._conns[k] if k < len(self._conns) else None
         if conn is None or self._busy[k]:
             return False
+        args, kwargs, columns = _pack(args, kwargs)
         try:
             conn.send((job, args, kwargs))
         except (OSError, ValueError):   # it died (a broken pipe)
             self._lost(k)
             return False
         except Exception:   # noqa: BLE001 - the job does not pickle (nothing was sent): it runs in-process
+            return False
+        try:
+            for column in columns:   # a column at a time (a strided one copied alone), written without a copy
+                conn.send_bytes(np.ascontiguousarray(column))
+        except (OSError, ValueError):   # it died: the job runs in-process
+            self._lost(k)
             return False
         self._busy[k] = True
         return True
@@ -170,7 +241,7 @@ class OutputWorkers:
             status, value = self._conns[k].recv()
         except (EOFError, OSError):
             self._lost(k)
-            return JOBS[job](*args, **kwargs)
+            return _local(job, args, kwargs)
         finally:
             self._busy[k] = False
         if status == "error":
@@ -180,7 +251,7 @@ class OutputWorkers:
     def call(self, k: int, job: str, *args, **kwargs):
         """``job(*args, **kwargs)`` in worker ``k`` (in-process if it is not there)."""
         if not self.submit(k, job, *args, **kwargs):
-            return JOBS[job](*args, **kwargs)
+            return _local(job, args, kwargs)
         return self.result(k, job, *args, **kwargs)
 
     def _lost(self, k: int) -> None:
