@@ -103,20 +103,36 @@ def _pack(args: tuple, kwargs: dict) -> tuple[tuple, dict, list[np.ndarray]]:
 
 
 def _unpack(conn, args: tuple, kwargs: dict) -> tuple[tuple, dict]:
-    """The worker's side of ``_pack``: each ``_Columns`` header made a ``RunResult`` of the columns received
-    (a column-major table: each column is received straight into its place)."""
-    from mechanism.cosim.record import RunResult
-
+    """The worker's side of ``_pack``: each ``_Columns`` header made a ``RunResult`` of the columns received."""
     def result(value):
-        if not isinstance(value, _Columns):
-            return value
-        data = np.empty((value.rows, len(value.names)), order="F")
-        for k in range(len(value.names)):
-            size = conn.recv_bytes_into(data[:, k])
-            if size != value.rows * data.itemsize:
-                raise ValueError(f"column {value.names[k]!r}: {size} bytes received, {value.rows * data.itemsize} expected")
-        return RunResult(list(value.names), data, value.meta, value.status, value.message)
+        return _receive(conn, value) if isinstance(value, _Columns) else value
     return tuple(map(result, args)), {key: result(value) for key, value in kwargs.items()}
+
+
+def _receive(conn, header: _Columns):
+    """The ``RunResult`` of the columns that follow ``header`` on ``conn`` (a column-major table: each column is
+    received straight into its place)."""
+    from mechanism.cosim.record import RunResult
+    data = np.empty((header.rows, len(header.names)), order="F")
+    for k in range(len(header.names)):
+        size = conn.recv_bytes_into(data[:, k])
+        if size != header.rows * data.itemsize:
+            raise ValueError(f"column {header.names[k]!r}: {size} bytes received, {header.rows * data.itemsize} expected")
+    return RunResult(list(header.names), data, header.meta, header.status, header.message)
+
+
+def _send_answer(conn, answer: tuple) -> None:
+    """``answer`` (``("ok", value)`` or ``("error", exception)``) on ``conn``; a RunResult value as a ``_Columns``
+    header and its columns as raw bytes (no pickled copy of its table on either side)."""
+    from mechanism.cosim.record import RunResult
+    status, value = answer
+    if not isinstance(value, RunResult):
+        conn.send(answer)
+        return
+    args, _, columns = _pack((ColumnsOf(value, tuple(value.columns)),), {})
+    conn.send((status, args[0]))
+    for column in columns:
+        conn.send_bytes(np.ascontiguousarray(column))
 
 
 def _forked(conn, ours, modules) -> None:
@@ -153,7 +169,9 @@ def serve(conn, modules) -> None:
         except Exception as err:   # noqa: BLE001 - raised again in the command
             answer = ("error", err)
         try:
-            conn.send(answer)
+            _send_answer(conn, answer)
+        except (OSError, ValueError):   # the command has gone
+            return
         except Exception as err:   # noqa: BLE001 - an exception that does not pickle
             conn.send(("error", RuntimeError(f"{type(err).__name__} in output worker: {err}")))
 
@@ -185,7 +203,7 @@ class OutputWorkers:
     the command starts, before the run loads its FMU or compiled kernels (one thread, numba not imported: checked
     when this was written); it inherits the modules imported so far (numpy), so it imports only matplotlib and
     scipy.interpolate. Jobs and answers are pickled over a pipe, but for the columns of ``ColumnsOf`` arguments
-    (raw bytes)."""
+    and of a RunResult answer (raw bytes)."""
 
     def __init__(self, n: int = 1):
         self._procs, self._conns, self._busy = [], [], []
@@ -239,6 +257,8 @@ class OutputWorkers:
         job (given again as ``job, args, kwargs``) runs in-process."""
         try:
             status, value = self._conns[k].recv()
+            if isinstance(value, _Columns):
+                value = _receive(self._conns[k], value)
         except (EOFError, OSError):
             self._lost(k)
             return _local(job, args, kwargs)
