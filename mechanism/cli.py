@@ -98,8 +98,12 @@ PHASES: dict[str, float] = {}
 def cmd_run(args) -> int:
     start = time.perf_counter()
     from mechanism.output.results import (
+        COMPARED,
+        DRAWN_WITH_IDEAL,
         compared_columns,
+        finish_outputs,
         output_lock,
+        start_run_plots,
         write_ideal_tables,
         write_outputs,
         write_run_table,
@@ -116,12 +120,17 @@ def cmd_run(args) -> int:
         marks.append(time.perf_counter())
         stopped = interrupted()
         wants_ideal = not stopped and config.joint != "ideal" and not args.no_ideal
-        early = None     # without plots, the run's table is written and let go before the ideal runs (issue 11)
-        if wants_ideal and args.no_plots:
+        # the run's table is written and let go before the ideal runs (issue 11); with plots, once a worker draws
+        # the figures of the run alone, keeping the columns of the others
+        early = drawing = None
+        if wants_ideal and not args.no_plots:
+            drawing = start_run_plots(result, out, workers)
+        if wants_ideal and (args.no_plots or drawing is not None):
             with stop_on_signals():   # a signal while writing waits until the file is complete (then no ideal)
                 early = write_run_table(result, out)
             stopped = interrupted()
-            result = compared_columns(result)   # what summary.json compares with the ideal; the rest is freed
+            # what summary.json compares with the ideal (and the plots draw beside it); the rest is freed
+            result = compared_columns(result, COMPARED if drawing is None else DRAWN_WITH_IDEAL)
         written = time.perf_counter() - marks[-1]
         ideal = None
         if wants_ideal and not stopped:
@@ -129,7 +138,9 @@ def cmd_run(args) -> int:
             stopped = interrupted()
         marks.append(time.perf_counter())
         with stop_on_signals():   # a signal while writing waits until the files are complete
-            if early is not None:
+            if drawing is not None:
+                figures = finish_outputs(early, result, out, ideal, workers, drawing, plots=not stopped)
+            elif early is not None:
                 figures = dict(write_ideal_tables(early, result, out, ideal), plots=[])
             else:
                 figures = write_outputs(result, out, ideal, plots=not args.no_plots and not stopped,

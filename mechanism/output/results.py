@@ -209,6 +209,59 @@ def plotted_columns(r: RunResult) -> tuple[str, ...]:
     return tuple(c for c in r.columns if c in PLOTTED or c.startswith("ball_load_"))
 
 
+#: the figures drawn from the run alone (no ideal curve in them): a worker draws them while the ideal counterpart
+#: runs, after which the command keeps only ``DRAWN_WITH_IDEAL`` of the run's table (``start_run_plots``)
+RUN_ONLY = ("eccentricity.png", "ball_loads.png", "energy.png")
+#: the run's columns the other figures read (``plots.plot_run``), ``COMPARED`` among them
+DRAWN_WITH_IDEAL = ("time", "crank_angle", "slider_a", "crank_moment", "F_x", "F_y", "slider_x")
+
+
+def start_run_plots(result: RunResult, out: Path, workers) -> tuple | None:
+    """Hand the first output worker ``RUN_ONLY``'s figures of ``result`` (its plotted columns as raw bytes), so
+    that the command can write the run's table and let it go before the ideal counterpart runs (issue 11);
+    ``finish_outputs`` collects them. None if there is no worker to take them (then keep the whole table)."""
+    from mechanism.output.workers import ColumnsOf
+    if workers is None or len(result["time"]) <= 1:
+        return None
+    names = plotted_columns(result)
+    if not workers.submit(0, "plots", ColumnsOf(result, names), Path(out), None, names=RUN_ONLY):
+        return None
+    # should the worker die, the figures are drawn in-process from timeseries.csv (written by then)
+    return 0, ColumnsOf(lambda: read_csv(Path(out) / "timeseries.csv"), names)
+
+
+def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult | None, workers, drawing: tuple,
+                   plots: bool = True) -> dict:
+    """``write_outputs`` after ``start_run_plots`` and ``write_run_table``: the figures with the ideal curve
+    (``result``: at least ``DRAWN_WITH_IDEAL``) drawn by a worker while ideal_timeseries.csv and summary.json are
+    written (``write_ideal_tables``); ``plots`` False draws no more (an interrupt). Returns ``figures`` completed,
+    with ``plots`` (all the PNG files written)."""
+    from mechanism.output.workers import ColumnsOf
+    k, fallback = drawing
+    rest = tuple(name for name in FIGURES if name not in RUN_ONLY) if plots else ()
+    other = 1 if len(workers) > 1 else None          # a second worker takes the rest at once
+    drawn = []
+    if other is None:
+        drawn += workers.result(k, "plots", fallback, out, None, names=RUN_ONLY)
+    sent = ColumnsOf(result, tuple(c for c in result.columns if c in DRAWN_WITH_IDEAL))
+    ideal_sent = None if ideal is None else ColumnsOf(ideal, plotted_columns(ideal))
+    j = k if other is None else other
+    submitted = bool(rest) and workers.submit(j, "plots", sent, out, ideal_sent, names=rest)
+    try:
+        figures = write_ideal_tables(figures, result, out, ideal)
+    finally:   # the workers' files are complete before anything else happens
+        if other is not None:
+            drawn += workers.result(k, "plots", fallback, out, None, names=RUN_ONLY)
+        if submitted:
+            drawn += workers.result(j, "plots", sent, out, ideal_sent, names=rest)
+    if rest and not submitted:
+        from mechanism.output.plots import plot_run
+        drawn += plot_run(result, out, ideal, names=rest)
+    order = {name: n for n, name in enumerate(FIGURES)}
+    figures["plots"] = [str(p) for p in sorted(drawn, key=lambda path: order[Path(path).name])]
+    return figures
+
+
 def _write_tables(result: RunResult, out: Path, ideal: RunResult | None) -> dict:
     """``write_outputs``'s CSV files and summary.json; returns the summary's figures."""
     return write_ideal_tables(write_run_table(result, out), result, out, ideal)
@@ -227,11 +280,12 @@ def write_run_table(result: RunResult, out: Path) -> dict:
 COMPARED = ("time", "slider_a", "slider_x")
 
 
-def compared_columns(result: RunResult) -> RunResult:
-    """``result`` reduced to the columns ``write_ideal_tables`` compares (``COMPARED``; a view when it already is)."""
-    if tuple(result.columns) == COMPARED:
+def compared_columns(result: RunResult, keep: tuple[str, ...] = COMPARED) -> RunResult:
+    """``result`` reduced to the columns ``keep`` (default those ``write_ideal_tables`` compares, ``COMPARED``;
+    ``result`` itself when it already is)."""
+    if tuple(result.columns) == keep:
         return result
-    names = [c for c in COMPARED if result.has(c)]
+    names = [c for c in keep if result.has(c)]
     data = np.empty((len(result.data), len(names)))
     for k, name in enumerate(names):
         data[:, k] = result[name]

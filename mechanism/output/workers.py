@@ -67,7 +67,8 @@ JOBS = {"plots": _plots, "resample": _resample}
 class ColumnsOf:
     """The columns ``names`` of a ``RunResult`` as a job's argument: a worker receives them as a RunResult of
     those columns, sent one column at a time as raw bytes (``Connection.send_bytes``: no pickled copy of the
-    table in the command, issue 11); a job run in-process gets ``result`` itself."""
+    table in the command, issue 11); a job run in-process gets ``result`` itself (or, a function, what it returns:
+    the table read back, given to ``OutputWorkers.result`` once the command has let the table go)."""
     result: Any
     names: tuple[str, ...]
 
@@ -85,7 +86,9 @@ class _Columns:
 def _local(job: str, args: tuple, kwargs: dict):
     """``job`` run in this process (each ``ColumnsOf`` replaced by its ``RunResult``)."""
     def own(value):
-        return value.result if isinstance(value, ColumnsOf) else value
+        if not isinstance(value, ColumnsOf):
+            return value
+        return value.result() if callable(value.result) else value.result
     return JOBS[job](*map(own, args), **{key: own(value) for key, value in kwargs.items()})
 
 
