@@ -1,7 +1,7 @@
 """Peak memory of ``python -m mechanism run`` (issue 11: a 20-revolution run under 200 MB peak).
 
     python benchmarks/memory.py [--revs 2 20] [--root CHECKOUT] [--fmu dist/BallBearing.fmu] [--plots]
-                                [--phases N] [-- EXTRA RUN ARGUMENTS]
+                                [--phases N] [--each] [-- EXTRA RUN ARGUMENTS]
 
 Each run is a fresh ``python -m mechanism run --revs N --quiet --no-plots`` (``--plots``: with the plots) in a
 subprocess of the checkout ``--root`` (default this one; e.g. a worktree of the commit before, to measure
@@ -9,6 +9,9 @@ before/after in one go); its peak resident set size is the child's ``ru_maxrss``
 and its own children, as ``/usr/bin/time -v`` reports it). Printed per run: the peak, the recorded data
 (timeseries.csv and ideal_timeseries.csv as float64 tables: rows x columns x 8 bytes) and the peak less the
 data; then the growth per revolution between the first and the last run (the data's own growth beside it).
+
+``--each`` runs each command once more in-process of a child (``mechanism.cli.main``) and prints its own peak
+(``RUSAGE_SELF``) and its output workers' (``RUSAGE_CHILDREN``: the largest reaped child).
 
 ``--phases N`` instead runs one N-revolution command (``mechanism.cli.main``) in a child that prints its resident
 set size and its peak within each phase (imports, the run, the ideal counterpart's run and resample, the summary
@@ -88,6 +91,23 @@ print("  modules: scipy.interpolate", "scipy.interpolate" in sys.modules, "| mat
 '''
 
 
+EACH = r'''
+import resource, sys
+from mechanism import cli
+rc = cli.main(sys.argv[1:])
+peak = lambda who: resource.getrusage(who).ru_maxrss / 1000
+print(f"EACH {peak(resource.RUSAGE_SELF):.1f} {peak(resource.RUSAGE_CHILDREN):.1f} {rc}")
+'''
+
+
+def each_peak(argv: list[str], root: Path) -> tuple[float, float, int]:
+    """(the command's own peak RSS, its output workers' largest [MB], exit status) of ``run argv`` in ``root``."""
+    out = subprocess.run([sys.executable, "-c", EACH, *argv], cwd=root, env=child_env(root), capture_output=True, check=False,
+                         text=True).stdout
+    line = [x for x in out.splitlines() if x.startswith("EACH ")][-1].split()
+    return float(line[1]), float(line[2]), int(line[3])
+
+
 def child_env(root: Path) -> dict:
     env = dict(os.environ)
     env["PYTHONPATH"] = str(root) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
@@ -121,6 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--plots", action="store_true", help="with the plots (default --no-plots)")
     parser.add_argument("--phases", type=float, default=None, metavar="N",
                         help="the phases of one N-revolution run instead")
+    parser.add_argument("--each", action="store_true",
+                        help="also the command's own peak and its output workers' (largest) in a second run")
     parser.add_argument("extra", nargs="*", help="more arguments for `run` (after --)")
     args = parser.parse_args(argv)
     root = args.root.resolve()
@@ -140,6 +162,10 @@ def main(argv: list[str] | None = None) -> int:
             peaks.append((revs, peak, data))
             print(f"{revs:6g} revolutions: peak RSS {peak:7.1f} MB, data {data:6.1f} MB, peak less data "
                   f"{peak - data:7.1f} MB" + (f"  (exit status {status})" if status else ""), flush=True)
+            if args.each:
+                own, workers, status = each_peak(cmd[3:], root)
+                print(f"{'':21s}the command {own:7.1f} MB, its output workers (largest) {workers:7.1f} MB"
+                      + (f"  (exit status {status})" if status else ""), flush=True)
         if len(peaks) > 1 and peaks[-1][0] != peaks[0][0]:
             (r0, p0, d0), (r1, p1, d1) = peaks[0], peaks[-1]
             print(f"growth per revolution ({r0:g} -> {r1:g}): {(p1 - p0) / (r1 - r0):.2f} MB "
