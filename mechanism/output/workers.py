@@ -1,7 +1,7 @@
 """Background processes that take the headline command's fixed output costs off its critical path (issue 11).
 
 ``python -m mechanism run`` spent, after its two runs, about 0.5-0.7 s importing matplotlib, 1.5-2 s drawing
-seven PNGs and 0.4 s importing scipy.interpolate for one cubic-spline resampling, while a run's master loop
+seven PNGs and 0.4 s importing scipy.interpolate for one cubic-spline resampling (now ``mechanism.cosim.spline``), while a run's master loop
 keeps one core busy and leaves the other idle (when the machine is). ``OutputWorkers`` forks a process (or
 two) when the command starts: it imports those modules while the master runs, then resamples the ideal
 counterpart and draws the figures (two workers: a share each, ``SHARES``) while the command writes the CSV
@@ -39,7 +39,8 @@ SHARES = (("joint_force.png", "slider_acceleration.png", "energy.png", "eccentri
           ("ball_loads.png", "slider_position_error.png", "crank_moment.png"))
 
 #: modules a worker imports while it waits for its first job (the first also resamples)
-IMPORTS = ("mechanism.output.plots", "mechanism.cosim.record", "scipy.interpolate")
+#: (the resampling no longer needs scipy.interpolate: ``mechanism.cosim.spline``, so ~20 MB less per worker)
+IMPORTS = ("mechanism.output.plots", "mechanism.cosim.record", "mechanism.cosim.spline")
 IMPORTS_OTHERS = ("mechanism.output.plots",)
 
 
@@ -204,8 +205,8 @@ class OutputWorkers:
 
     A worker is forked (``multiprocessing``'s fork context: no helper process such as a resource tracker) when
     the command starts, before the run loads its FMU or compiled kernels (one thread, numba not imported: checked
-    when this was written); it inherits the modules imported so far (numpy), so it imports only matplotlib and
-    scipy.interpolate. Jobs and answers are pickled over a pipe, but for the columns of ``ColumnsOf`` arguments
+    when this was written); it inherits the modules imported so far (numpy), so it imports only matplotlib (and
+    the numpy-only spline). Jobs and answers are pickled over a pipe, but for the columns of ``ColumnsOf`` arguments
     and of a RunResult answer (raw bytes)."""
 
     def __init__(self, n: int = 1):
