@@ -1,12 +1,14 @@
 """Background processes that take the headline command's fixed output costs off its critical path (issue 11).
 
 ``python -m mechanism run`` spent, after its two runs, about 0.5-0.7 s importing matplotlib, 1.5-2 s drawing
-seven PNGs and 0.4 s importing scipy.interpolate for one cubic-spline resampling (now ``mechanism.cosim.spline``), while a run's master loop
-keeps one core busy and leaves the other idle (when the machine is). ``OutputWorkers`` forks a process (or
-two) when the command starts: it imports those modules while the master runs, then resamples the ideal
-counterpart and draws the figures (two workers: a share each, ``SHARES``) while the command writes the CSV
-files. The files are the same bytes as drawn in-process (the same functions, ``plots.plot_run`` and
-``record.resample``, run in another process) and are written atomically as before (``atomic.save_figure``).
+seven PNGs and 0.4 s importing scipy.interpolate for one cubic-spline resampling (now ``mechanism.cosim.spline``),
+while a run's master loop keeps one core busy and leaves the other idle (when the machine is). ``OutputWorkers`` forks a process (or
+two) when the command starts: it imports those modules while the master runs, then draws the figures of the run
+alone while the command writes the run's table and runs the ideal counterpart, and the others while the command
+writes the ideal's table (``results.start_run_plots``, ``finish_outputs``; ``write_outputs``: two workers draw a
+share each, ``SHARES``). A worker receives only the columns the figures read, as raw bytes (``ColumnsOf``: the
+command makes no pickled copy of its tables, issue 11). The files are the same bytes as drawn in-process (the
+same functions, ``plots.plot_run`` and ``record.resample``, run in another process) and are written atomically as before (``atomic.save_figure``).
 
 Robustness: the workers ignore SIGINT (the command decides what an interrupt does: ``run.stop_on_signals``)
 and end when the command's end of their pipe closes (the command died) or at ``close``; an error in a job is
