@@ -240,9 +240,16 @@ def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult
     k, fallback = drawing
     rest = tuple(name for name in FIGURES if name not in RUN_ONLY) if plots else ()
     other = 1 if len(workers) > 1 else None          # a second worker takes the rest at once
-    drawn = []
+    drawn, errors = [], []
+
+    def collect(j: int, *args, **kwargs) -> None:
+        try:
+            drawn.extend(workers.result(j, "plots", *args, **kwargs))
+        except BaseException as err:   # noqa: BLE001 - raised below, once the tables are written
+            errors.append(err)
+
     if other is None:
-        drawn += workers.result(k, "plots", fallback, out, None, names=RUN_ONLY)
+        collect(k, fallback, out, None, names=RUN_ONLY)
     sent = ColumnsOf(result, tuple(c for c in result.columns if c in DRAWN_WITH_IDEAL))
     ideal_sent = None if ideal is None else ColumnsOf(ideal, plotted_columns(ideal))
     j = k if other is None else other
@@ -251,9 +258,11 @@ def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult
         figures = write_ideal_tables(figures, result, out, ideal)
     finally:   # the workers' files are complete before anything else happens
         if other is not None:
-            drawn += workers.result(k, "plots", fallback, out, None, names=RUN_ONLY)
+            collect(k, fallback, out, None, names=RUN_ONLY)
         if submitted:
-            drawn += workers.result(j, "plots", sent, out, ideal_sent, names=rest)
+            collect(j, sent, out, ideal_sent, names=rest)
+    if errors:
+        raise errors[0]
     if rest and not submitted:
         from mechanism.output.plots import plot_run
         drawn += plot_run(result, out, ideal, names=rest)
