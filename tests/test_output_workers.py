@@ -139,3 +139,9 @@ def test_columns_are_sent_as_raw_bytes(runs):
     assert got.columns == list(names) and np.array_equal(got.data, ref.data) and got.meta == ref.meta
     assert np.array_equal(again.data, ref.data[:7])
     assert local.columns == coarse.columns and np.array_equal(local.data, resample(coarse, r["time"]).data)
+
+
+def test_the_run_only_figures_and_the_rest_are_the_figures_once_each():
+    from mechanism.output.results import REST, RUN_ONLY
+    names = [*RUN_ONLY, *REST[0], *REST[1]]
+    assert sorted(names) == sorted(plots.FIGURES)

@@ -212,6 +212,11 @@ def plotted_columns(r: RunResult) -> tuple[str, ...]:
 #: the figures drawn from the run alone (no ideal curve in them): a worker draws them while the ideal counterpart
 #: runs, after which the command keeps only ``DRAWN_WITH_IDEAL`` of the run's table (``start_run_plots``)
 RUN_ONLY = ("eccentricity.png", "ball_loads.png", "energy.png")
+#: the other figures (drawn with the ideal curve): with two workers, the second draws the first share while the
+#: first worker draws the second after ``RUN_ONLY`` (drawing times, PNG of a 2-revolution run: joint force 0.45 s,
+#: slider acceleration 0.22 against ball loads 0.45, energy 0.17, eccentricity 0.10, position error 0.21, crank
+#: moment 0.20: ``workers.SHARES``)
+REST = (("slider_acceleration.png", "joint_force.png"), ("crank_moment.png", "slider_position_error.png"))
 #: the run's columns the other figures read (``plots.plot_run``), ``COMPARED`` among them
 DRAWN_WITH_IDEAL = ("time", "crank_angle", "slider_a", "crank_moment", "F_x", "F_y", "slider_x")
 
@@ -238,8 +243,12 @@ def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult
     with ``plots`` (all the PNG files written)."""
     from mechanism.output.workers import ColumnsOf
     k, fallback = drawing
-    rest = tuple(name for name in FIGURES if name not in RUN_ONLY) if plots else ()
-    other = 1 if len(workers) > 1 else None          # a second worker takes the rest at once
+    # two workers: the second takes REST[0] at once, the first REST[1] after its run-only figures (about equal
+    # ends); one worker: all of them after its run-only figures, once the tables are written
+    shares = (REST[0], REST[1]) if len(workers) > 1 else (REST[0] + REST[1],)
+    shares = tuple(tuple(name for name in FIGURES if name in share) for share in shares) if plots else ()
+    sent = ColumnsOf(result, tuple(c for c in result.columns if c in DRAWN_WITH_IDEAL))
+    ideal_sent = None if ideal is None else ColumnsOf(ideal, plotted_columns(ideal))
     drawn, errors = [], []
 
     def collect(j: int, *args, **kwargs) -> None:
@@ -248,24 +257,24 @@ def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult
         except BaseException as err:   # noqa: BLE001 - raised below, once the tables are written
             errors.append(err)
 
-    if other is None:
-        collect(k, fallback, out, None, names=RUN_ONLY)
-    sent = ColumnsOf(result, tuple(c for c in result.columns if c in DRAWN_WITH_IDEAL))
-    ideal_sent = None if ideal is None else ColumnsOf(ideal, plotted_columns(ideal))
-    j = k if other is None else other
-    submitted = bool(rest) and workers.submit(j, "plots", sent, out, ideal_sent, names=rest)
+    def submit(j: int, names: tuple[str, ...]) -> list:
+        return [(j, names)] if workers.submit(j, "plots", sent, out, ideal_sent, names=names) else []
+
+    submitted = submit(1, shares[0]) if len(shares) > 1 else []
     try:
         figures = write_ideal_tables(figures, result, out, ideal)
     finally:   # the workers' files are complete before anything else happens
-        if other is not None:
-            collect(k, fallback, out, None, names=RUN_ONLY)
-        if submitted:
-            collect(j, sent, out, ideal_sent, names=rest)
+        collect(k, fallback, out, None, names=RUN_ONLY)
+    if not errors:   # the first worker's next share (sent now: it reads it at once, the command does not wait)
+        submitted += [share for names in shares[len(submitted):] for share in submit(k, names)]
+    for j, names in submitted:
+        collect(j, sent, out, ideal_sent, names=names)
     if errors:
         raise errors[0]
-    if rest and not submitted:
+    rest = [name for names in shares if not any(names == done for _, done in submitted) for name in names]
+    if rest:   # no worker could take them: drawn here
         from mechanism.output.plots import plot_run
-        drawn += plot_run(result, out, ideal, names=rest)
+        drawn += plot_run(result, out, ideal, names=tuple(rest))
     order = {name: n for n, name in enumerate(FIGURES)}
     figures["plots"] = [str(p) for p in sorted(drawn, key=lambda path: order[Path(path).name])]
     return figures
