@@ -37,7 +37,26 @@ were ~11 MB of temporaries); CSV chunks of 256 rows (2,000 rows left ~5 MB of fr
 left of a 20-revolution run's 211 MB: interpreter, numpy and the project's modules 35 MB, numba 62 MB, the
 compiled kernels ~70 MB, the FMU ~6-10 MB, the run's table 27.7 MB (1.38 MB per revolution) and ~4 MB while
 the table is written (the summary, the compared columns kept for the ideal counterpart).
-With ``--plots`` the peak is ~306 MB before and after (the tables pickled to the output workers).
+With ``--plots`` the peak was ~297-306 MB (the tables pickled to the output workers).
+
+With plots (05:05-05:12 UTC, ``python benchmarks/memory.py --plots --each`` here and with ``--root`` a checkout of
+a6e803a, ``--fmu`` this checkout's dist/BallBearing.fmu; the other columns ``--no-plots``):
+
+                          with plots: before (a6e803a)   after       without plots: before   after
+    2 revolutions             194.1 MB                  185.9 MB                   185.2 MB   185.3 MB
+    20 revolutions            297.2 MB                  213.6 MB                   210.0 MB   210.4 MB
+                                                                    (/usr/bin/time -v: 297,088 and 213,504 kbytes)
+    the command alone (20)    297.4 MB                  213.7 MB
+    its worker (largest, 20)  202.7 MB                  109.1 MB   (two workers: 109.2 MB)
+
+Where it went (``--phases 20 --plots``): the workers receive only the columns the figures read, one column at a
+time as raw bytes (``workers.ColumnsOf``, ``Connection.send_bytes``), not the pickled tables (the command's
+pickled copy was ~65 MB: 297.5 -> 225 MB); the resampled ideal comes back the same way (no pickled copy on
+receipt: 238 -> 224 MB); a worker draws the figures of the run alone while the command writes the run's table and
+lets it go (it keeps the 7 columns the other figures read, 5.9 MB) before the ideal counterpart runs, as without
+plots (224 -> 214 MB: the peak is now the run's own, 206.5 MB, and the 5.9 MB copy kept); the workers no longer
+import scipy.interpolate (~20 MB each). Every file (PNGs, CSVs, summary.json) of a 20-revolution run is the
+same bytes as before.
 """
 from __future__ import annotations
 
