@@ -171,8 +171,8 @@ def cmd_run(args) -> int:
 
 @contextmanager
 def output_workers(plots: bool):
-    """``mechanism.output.workers.OutputWorkers`` for a run that plots (they import matplotlib and scipy while
-    the run runs), None otherwise or where they are disabled."""
+    """``mechanism.output.workers.OutputWorkers`` for a run that plots (they import matplotlib while the run
+    runs), None otherwise or where they are disabled."""
     from mechanism.output import workers
     n = workers.count() if plots else 0
     if not n:
@@ -187,8 +187,8 @@ def ideal_counterpart(config: RunConfig, result, workers=None):
     (``IDEAL_STEP``: RK4 at 1e-4 s matches 1e-5 s to < 1e-9, mechanism.studies.reproduce.cases), resampled
     by cubic splines onto the bearing run's sample times when those are finer (error < 1e-9 relative
     for these smooth signals; measured in tests/test_kernels.py; ``record.resample``, scipy's spline without
-    importing scipy.interpolate). ``workers``: the resampling runs in the first output worker (the same
-    function, the same numbers)."""
+    importing scipy.interpolate). ``workers``: the resampling runs in the first output worker when it is idle (the
+    same function, the same numbers); the command resamples itself while that worker draws the run's figures."""
     from dataclasses import replace
 
     from mechanism.cosim.record import resample
