@@ -1,7 +1,7 @@
 """Peak memory of ``python -m mechanism run`` (issue 11: a 20-revolution run under 200 MB peak).
 
     python benchmarks/memory.py [--revs 2 20] [--root CHECKOUT] [--fmu dist/BallBearing.fmu] [--plots]
-                                [--phases N] [-- EXTRA RUN ARGUMENTS]
+                                [--phases N] [--each] [-- EXTRA RUN ARGUMENTS]
 
 Each run is a fresh ``python -m mechanism run --revs N --quiet --no-plots`` (``--plots``: with the plots) in a
 subprocess of the checkout ``--root`` (default this one; e.g. a worktree of the commit before, to measure
@@ -9,6 +9,9 @@ before/after in one go); its peak resident set size is the child's ``ru_maxrss``
 and its own children, as ``/usr/bin/time -v`` reports it). Printed per run: the peak, the recorded data
 (timeseries.csv and ideal_timeseries.csv as float64 tables: rows x columns x 8 bytes) and the peak less the
 data; then the growth per revolution between the first and the last run (the data's own growth beside it).
+
+``--each`` runs each command once more in-process of a child (``mechanism.cli.main``) and prints its own peak
+(``RUSAGE_SELF``) and its output workers' (``RUSAGE_CHILDREN``: the largest reaped child).
 
 ``--phases N`` instead runs one N-revolution command (``mechanism.cli.main``) in a child that prints its resident
 set size and its peak within each phase (imports, the run, the ideal counterpart's run and resample, the summary
@@ -34,7 +37,26 @@ were ~11 MB of temporaries); CSV chunks of 256 rows (2,000 rows left ~5 MB of fr
 left of a 20-revolution run's 211 MB: interpreter, numpy and the project's modules 35 MB, numba 62 MB, the
 compiled kernels ~70 MB, the FMU ~6-10 MB, the run's table 27.7 MB (1.38 MB per revolution) and ~4 MB while
 the table is written (the summary, the compared columns kept for the ideal counterpart).
-With ``--plots`` the peak is ~306 MB before and after (the tables pickled to the output workers).
+With ``--plots`` the peak was ~297-306 MB (the tables pickled to the output workers).
+
+With plots (05:05-05:12 UTC, ``python benchmarks/memory.py --plots --each`` here and with ``--root`` a checkout of
+a6e803a, ``--fmu`` this checkout's dist/BallBearing.fmu; the other columns ``--no-plots``):
+
+                          with plots: before (a6e803a)   after       without plots: before   after
+    2 revolutions             194.1 MB                  185.9 MB                   185.2 MB   185.3 MB
+    20 revolutions            297.2 MB                  213.6 MB                   210.0 MB   210.4 MB
+                                                                    (/usr/bin/time -v: 297,088 and 213,504 kbytes)
+    the command alone (20)    297.4 MB                  213.7 MB
+    its worker (largest, 20)  202.7 MB                  109.1 MB   (two workers: 109.2 MB)
+
+Where it went (``--phases 20 --plots``): the workers receive only the columns the figures read, one column at a
+time as raw bytes (``workers.ColumnsOf``, ``Connection.send_bytes``), not the pickled tables (the command's
+pickled copy was ~65 MB: 297.5 -> 225 MB); the resampled ideal comes back the same way (no pickled copy on
+receipt: 238 -> 224 MB); a worker draws the figures of the run alone while the command writes the run's table and
+lets it go (it keeps the 7 columns the other figures read, 5.9 MB) before the ideal counterpart runs, as without
+plots (224 -> 214 MB: the peak is now the run's own, 206.5 MB, and the 5.9 MB copy kept); the workers no longer
+import scipy.interpolate (~20 MB each). Every file (PNGs, CSVs, summary.json) of a 20-revolution run is the
+same bytes as before.
 """
 from __future__ import annotations
 
@@ -88,6 +110,23 @@ print("  modules: scipy.interpolate", "scipy.interpolate" in sys.modules, "| mat
 '''
 
 
+EACH = r'''
+import resource, sys
+from mechanism import cli
+rc = cli.main(sys.argv[1:])
+peak = lambda who: resource.getrusage(who).ru_maxrss / 1000
+print(f"EACH {peak(resource.RUSAGE_SELF):.1f} {peak(resource.RUSAGE_CHILDREN):.1f} {rc}")
+'''
+
+
+def each_peak(argv: list[str], root: Path) -> tuple[float, float, int]:
+    """(the command's own peak RSS, its output workers' largest [MB], exit status) of ``run argv`` in ``root``."""
+    out = subprocess.run([sys.executable, "-c", EACH, *argv], cwd=root, env=child_env(root), capture_output=True, check=False,
+                         text=True).stdout
+    line = [x for x in out.splitlines() if x.startswith("EACH ")][-1].split()
+    return float(line[1]), float(line[2]), int(line[3])
+
+
 def child_env(root: Path) -> dict:
     env = dict(os.environ)
     env["PYTHONPATH"] = str(root) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
@@ -121,6 +160,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--plots", action="store_true", help="with the plots (default --no-plots)")
     parser.add_argument("--phases", type=float, default=None, metavar="N",
                         help="the phases of one N-revolution run instead")
+    parser.add_argument("--each", action="store_true",
+                        help="also the command's own peak and its output workers' (largest) in a second run")
     parser.add_argument("extra", nargs="*", help="more arguments for `run` (after --)")
     args = parser.parse_args(argv)
     root = args.root.resolve()
@@ -140,6 +181,10 @@ def main(argv: list[str] | None = None) -> int:
             peaks.append((revs, peak, data))
             print(f"{revs:6g} revolutions: peak RSS {peak:7.1f} MB, data {data:6.1f} MB, peak less data "
                   f"{peak - data:7.1f} MB" + (f"  (exit status {status})" if status else ""), flush=True)
+            if args.each:
+                own, workers, status = each_peak(cmd[3:], root)
+                print(f"{'':21s}the command {own:7.1f} MB, its output workers (largest) {workers:7.1f} MB"
+                      + (f"  (exit status {status})" if status else ""), flush=True)
         if len(peaks) > 1 and peaks[-1][0] != peaks[0][0]:
             (r0, p0, d0), (r1, p1, d1) = peaks[0], peaks[-1]
             print(f"growth per revolution ({r0:g} -> {r1:g}): {(p1 - p0) / (r1 - r0):.2f} MB "

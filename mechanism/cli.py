@@ -98,8 +98,12 @@ PHASES: dict[str, float] = {}
 def cmd_run(args) -> int:
     start = time.perf_counter()
     from mechanism.output.results import (
+        COMPARED,
+        DRAWN_WITH_IDEAL,
         compared_columns,
+        finish_outputs,
         output_lock,
+        start_run_plots,
         write_ideal_tables,
         write_outputs,
         write_run_table,
@@ -116,12 +120,17 @@ def cmd_run(args) -> int:
         marks.append(time.perf_counter())
         stopped = interrupted()
         wants_ideal = not stopped and config.joint != "ideal" and not args.no_ideal
-        early = None     # without plots, the run's table is written and let go before the ideal runs (issue 11)
-        if wants_ideal and args.no_plots:
+        # the run's table is written and let go before the ideal runs (issue 11); with plots, once a worker draws
+        # the figures of the run alone, keeping the columns of the others
+        early = drawing = None
+        if wants_ideal and not args.no_plots:
+            drawing = start_run_plots(result, out, workers)
+        if wants_ideal and (args.no_plots or drawing is not None):
             with stop_on_signals():   # a signal while writing waits until the file is complete (then no ideal)
                 early = write_run_table(result, out)
             stopped = interrupted()
-            result = compared_columns(result)   # what summary.json compares with the ideal; the rest is freed
+            # what summary.json compares with the ideal (and the plots draw beside it); the rest is freed
+            result = compared_columns(result, COMPARED if drawing is None else DRAWN_WITH_IDEAL)
         written = time.perf_counter() - marks[-1]
         ideal = None
         if wants_ideal and not stopped:
@@ -129,7 +138,9 @@ def cmd_run(args) -> int:
             stopped = interrupted()
         marks.append(time.perf_counter())
         with stop_on_signals():   # a signal while writing waits until the files are complete
-            if early is not None:
+            if drawing is not None:
+                figures = finish_outputs(early, result, out, ideal, workers, drawing, plots=not stopped)
+            elif early is not None:
                 figures = dict(write_ideal_tables(early, result, out, ideal), plots=[])
             else:
                 figures = write_outputs(result, out, ideal, plots=not args.no_plots and not stopped,
@@ -160,8 +171,8 @@ def cmd_run(args) -> int:
 
 @contextmanager
 def output_workers(plots: bool):
-    """``mechanism.output.workers.OutputWorkers`` for a run that plots (they import matplotlib and scipy while
-    the run runs), None otherwise or where they are disabled."""
+    """``mechanism.output.workers.OutputWorkers`` for a run that plots (they import matplotlib while the run
+    runs), None otherwise or where they are disabled."""
     from mechanism.output import workers
     n = workers.count() if plots else 0
     if not n:
@@ -176,8 +187,8 @@ def ideal_counterpart(config: RunConfig, result, workers=None):
     (``IDEAL_STEP``: RK4 at 1e-4 s matches 1e-5 s to < 1e-9, mechanism.studies.reproduce.cases), resampled
     by cubic splines onto the bearing run's sample times when those are finer (error < 1e-9 relative
     for these smooth signals; measured in tests/test_kernels.py; ``record.resample``, scipy's spline without
-    importing scipy.interpolate). ``workers``: the resampling runs in the first output worker (the same
-    function, the same numbers)."""
+    importing scipy.interpolate). ``workers``: the resampling runs in the first output worker when it is idle (the
+    same function, the same numbers); the command resamples itself while that worker draws the run's figures."""
     from dataclasses import replace
 
     from mechanism.cosim.record import resample

@@ -173,3 +173,55 @@ def test_the_command_without_plots_writes_what_write_outputs_writes(tmp_path):
     write_outputs(result, tmp_path / "held", ideal_counterpart(config, result), plots=False)
     for name in ("timeseries.csv", "ideal_timeseries.csv", "summary.json"):
         assert (tmp_path / "cli" / name).read_bytes() == (tmp_path / "held" / name).read_bytes(), name
+
+
+@pytest.mark.parametrize("n", [1, 2])
+def test_the_command_with_plots_writes_what_write_outputs_writes(tmp_path, monkeypatch, n):
+    """``run`` with plots also lets the run's table go before the ideal counterpart runs (a worker draws the
+    run-only figures meanwhile): every file, the PNGs too, is the bytes ``write_outputs`` writes in-process from
+    the run and its ideal counterpart held together."""
+    from mechanism.cli import ideal_counterpart, main
+    from mechanism.output.results import write_outputs
+    from mechanism.run import RunConfig, run
+    monkeypatch.setenv("MECHANISM_OUTPUT_WORKERS", str(n))
+    assert main(["run", "--revs", "0.2", "--mode", "inprocess", "--quiet", "--out", str(tmp_path / "cli")]) == 0
+    config = RunConfig(revs=0.2, mode="inprocess", progress=False)
+    result = run(config)
+    held = write_outputs(result, tmp_path / "held", ideal_counterpart(config, result))
+    assert len(held["plots"]) == 7
+    names = sorted(p.name for p in (tmp_path / "held").iterdir() if not p.name.startswith("."))
+    assert names == sorted(p.name for p in (tmp_path / "cli").iterdir() if not p.name.startswith("."))
+    for name in names:
+        assert (tmp_path / "cli" / name).read_bytes() == (tmp_path / "held" / name).read_bytes(), name
+
+
+def test_a_worker_that_dies_with_the_run_only_figures_leaves_them_drawn_in_process(tmp_path):
+    """``start_run_plots``'s worker killed: ``finish_outputs`` draws its figures from timeseries.csv read back."""
+    import os
+    import signal
+
+    from mechanism.cli import ideal_counterpart
+    from mechanism.output import workers
+    from mechanism.output.figures import FIGURES
+    from mechanism.output.results import (
+        DRAWN_WITH_IDEAL,
+        compared_columns,
+        finish_outputs,
+        start_run_plots,
+        write_run_table,
+    )
+    from mechanism.run import RunConfig, run
+    config = RunConfig(revs=0.1, mode="inprocess", progress=False)
+    result = run(config)
+    with workers.OutputWorkers(1) as w:
+        # stopped, it draws nothing; the job (~80 kB of columns) fits in the socket pair's buffers; then it dies
+        os.kill(w._procs[0].pid, signal.SIGSTOP)
+        drawing = start_run_plots(result, tmp_path, w)
+        assert drawing is not None
+        early = write_run_table(result, tmp_path)
+        kept = compared_columns(result, DRAWN_WITH_IDEAL)
+        os.kill(w._procs[0].pid, signal.SIGKILL)
+        w._procs[0].join(5)
+        figures = finish_outputs(early, kept, tmp_path, ideal_counterpart(config, kept), w, drawing)
+    assert [os.path.basename(p) for p in figures["plots"]] == list(FIGURES)
+    assert all((tmp_path / name).stat().st_size > 0 for name in FIGURES)

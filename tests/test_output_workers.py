@@ -102,3 +102,46 @@ def test_the_command_does_not_import_matplotlib_when_a_worker_draws(tmp_path):
     out = subprocess.run([sys.executable, "-c", code, "run", "--mode", "inprocess", "--revs", "0.05", "--quiet",
                           "--out", str(tmp_path)], capture_output=True, text=True, check=True).stdout
     assert out.strip().splitlines()[-1] == "[]" and len(list(tmp_path.glob("*.png"))) == len(plots.FIGURES)
+
+
+def test_only_the_plotted_columns_draw_the_same_files(tmp_path, runs):
+    """``results.PLOTTED`` held against ``plot_run``: the figures of a run and its ideal reduced to
+    ``plotted_columns`` (as the workers receive them) are the bytes of the whole tables'."""
+    from mechanism.output.results import plotted_columns
+    r, ideal = runs
+
+    def reduced(x: RunResult) -> RunResult:
+        names = list(plotted_columns(x))
+        return RunResult(names, np.asfortranarray(np.column_stack([x[c] for c in names])), x.meta)
+    assert len(plotted_columns(r)) < len(r.columns)
+    (tmp_path / "whole").mkdir()
+    (tmp_path / "part").mkdir()
+    whole = plots.plot_run(r, tmp_path / "whole", ideal)
+    part = plots.plot_run(reduced(r), tmp_path / "part", reduced(ideal))
+    assert [p.name for p in part] == [p.name for p in whole] and len(whole) == len(plots.FIGURES)
+    for a, b in zip(whole, part):
+        assert a.read_bytes() == b.read_bytes(), a.name
+
+
+def test_columns_are_sent_as_raw_bytes(runs):
+    """A ``ColumnsOf`` argument reaches the worker as a RunResult of those columns, values and metadata intact;
+    in-process (the worker died) the job gets the whole RunResult."""
+    r = runs[0]
+    coarse = _ideal(r)
+    names = ("time", "slider_a", "F_x")
+    with workers.OutputWorkers(1) as w:
+        got = w.call(0, "resample", workers.ColumnsOf(coarse, names), r["time"])
+        again = w.call(0, "resample", workers.ColumnsOf(coarse, names), r["time"][:7])   # the pipe is in step
+        os.kill(w._procs[0].pid, signal.SIGKILL)
+        w._procs[0].join(5)
+        local = w.call(0, "resample", workers.ColumnsOf(coarse, names), r["time"])
+    ref = resample(RunResult(list(names), np.column_stack([coarse[c] for c in names]), coarse.meta), r["time"])
+    assert got.columns == list(names) and np.array_equal(got.data, ref.data) and got.meta == ref.meta
+    assert np.array_equal(again.data, ref.data[:7])
+    assert local.columns == coarse.columns and np.array_equal(local.data, resample(coarse, r["time"]).data)
+
+
+def test_the_run_only_figures_and_the_rest_are_the_figures_once_each():
+    from mechanism.output.results import REST, RUN_ONLY
+    names = [*RUN_ONLY, *REST[0], *REST[1]]
+    assert sorted(names) == sorted(plots.FIGURES)

@@ -168,9 +168,12 @@ def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, 
     draw = plots and len(result["time"]) > 1
     shares = []
     if draw and workers is not None:
+        from mechanism.output.workers import ColumnsOf
         from mechanism.output.workers import shares as shares_of
+        run_sent = ColumnsOf(result, plotted_columns(result))     # only the plotted columns, as raw bytes
+        ideal_sent = None if ideal is None else ColumnsOf(ideal, plotted_columns(ideal))
         shares = [(k, names) for k, names in enumerate(shares_of(len(workers)))
-                  if workers.submit(k, "plots", result, out, ideal, names=names)]
+                  if workers.submit(k, "plots", run_sent, out, ideal_sent, names=names)]
     try:
         figures = _write_tables(result, out, ideal)
     finally:   # the workers' files are complete before anything else happens (an error is raised after)
@@ -196,6 +199,87 @@ def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, 
     return figures
 
 
+#: the columns ``plots.plot_run`` reads (besides the ball loads): the workers receive only these (issue 11)
+PLOTTED = ("time", "crank_angle", "e_x", "e_y", "slider_a", "crank_moment", "F_x", "F_y", "slider_x",
+           "damping_dissipation", "contact_energy", "cage_work", "energy_residual")
+
+
+def plotted_columns(r: RunResult) -> tuple[str, ...]:
+    """The columns of ``r`` that ``plots.plot_run`` reads (``PLOTTED`` and the ball loads), in ``r``'s order."""
+    return tuple(c for c in r.columns if c in PLOTTED or c.startswith("ball_load_"))
+
+
+#: the figures drawn from the run alone (no ideal curve in them): a worker draws them while the ideal counterpart
+#: runs, after which the command keeps only ``DRAWN_WITH_IDEAL`` of the run's table (``start_run_plots``)
+RUN_ONLY = ("eccentricity.png", "ball_loads.png", "energy.png")
+#: the other figures (drawn with the ideal curve): with two workers, the second draws the first share while the
+#: first worker draws the second after ``RUN_ONLY`` (drawing times, PNG of a 2-revolution run: joint force 0.45 s,
+#: slider acceleration 0.22 against ball loads 0.45, energy 0.17, eccentricity 0.10, position error 0.21, crank
+#: moment 0.20: ``workers.SHARES``)
+REST = (("slider_acceleration.png", "joint_force.png"), ("crank_moment.png", "slider_position_error.png"))
+#: the run's columns the other figures read (``plots.plot_run``), ``COMPARED`` among them
+DRAWN_WITH_IDEAL = ("time", "crank_angle", "slider_a", "crank_moment", "F_x", "F_y", "slider_x")
+
+
+def start_run_plots(result: RunResult, out: Path, workers) -> tuple | None:
+    """Hand the first output worker ``RUN_ONLY``'s figures of ``result`` (its plotted columns as raw bytes), so
+    that the command can write the run's table and let it go before the ideal counterpart runs (issue 11);
+    ``finish_outputs`` collects them. None if there is no worker to take them (then keep the whole table)."""
+    from mechanism.output.workers import ColumnsOf
+    if workers is None or len(result["time"]) <= 1:
+        return None
+    names = plotted_columns(result)
+    if not workers.submit(0, "plots", ColumnsOf(result, names), Path(out), None, names=RUN_ONLY):
+        return None
+    # should the worker die, the figures are drawn in-process from timeseries.csv (written by then)
+    return 0, ColumnsOf(lambda: read_csv(Path(out) / "timeseries.csv"), names)
+
+
+def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult | None, workers, drawing: tuple,
+                   plots: bool = True) -> dict:
+    """``write_outputs`` after ``start_run_plots`` and ``write_run_table``: the figures with the ideal curve
+    (``result``: at least ``DRAWN_WITH_IDEAL``) drawn by a worker while ideal_timeseries.csv and summary.json are
+    written (``write_ideal_tables``); ``plots`` False draws no more (an interrupt). Returns ``figures`` completed,
+    with ``plots`` (all the PNG files written)."""
+    from mechanism.output.workers import ColumnsOf
+    k, fallback = drawing
+    # two workers: the second takes REST[0] at once, the first REST[1] after its run-only figures (about equal
+    # ends); one worker: all of them after its run-only figures, once the tables are written
+    shares = (REST[0], REST[1]) if len(workers) > 1 else (REST[0] + REST[1],)
+    shares = tuple(tuple(name for name in FIGURES if name in share) for share in shares) if plots else ()
+    sent = ColumnsOf(result, tuple(c for c in result.columns if c in DRAWN_WITH_IDEAL))
+    ideal_sent = None if ideal is None else ColumnsOf(ideal, plotted_columns(ideal))
+    drawn, errors = [], []
+
+    def collect(j: int, *args, **kwargs) -> None:
+        try:
+            drawn.extend(workers.result(j, "plots", *args, **kwargs))
+        except BaseException as err:   # noqa: BLE001 - raised below, once the tables are written
+            errors.append(err)
+
+    def submit(j: int, names: tuple[str, ...]) -> list:
+        return [(j, names)] if workers.submit(j, "plots", sent, out, ideal_sent, names=names) else []
+
+    submitted = submit(1, shares[0]) if len(shares) > 1 else []
+    try:
+        figures = write_ideal_tables(figures, result, out, ideal)
+    finally:   # the workers' files are complete before anything else happens
+        collect(k, fallback, out, None, names=RUN_ONLY)
+    if not errors:   # the first worker's next share (sent now: it reads it at once, the command does not wait)
+        submitted += [share for names in shares[len(submitted):] for share in submit(k, names)]
+    for j, names in submitted:
+        collect(j, sent, out, ideal_sent, names=names)
+    if errors:
+        raise errors[0]
+    rest = [name for names in shares if not any(names == done for _, done in submitted) for name in names]
+    if rest:   # no worker could take them: drawn here
+        from mechanism.output.plots import plot_run
+        drawn += plot_run(result, out, ideal, names=tuple(rest))
+    order = {name: n for n, name in enumerate(FIGURES)}
+    figures["plots"] = [str(p) for p in sorted(drawn, key=lambda path: order[Path(path).name])]
+    return figures
+
+
 def _write_tables(result: RunResult, out: Path, ideal: RunResult | None) -> dict:
     """``write_outputs``'s CSV files and summary.json; returns the summary's figures."""
     return write_ideal_tables(write_run_table(result, out), result, out, ideal)
@@ -214,11 +298,12 @@ def write_run_table(result: RunResult, out: Path) -> dict:
 COMPARED = ("time", "slider_a", "slider_x")
 
 
-def compared_columns(result: RunResult) -> RunResult:
-    """``result`` reduced to the columns ``write_ideal_tables`` compares (``COMPARED``; a view when it already is)."""
-    if tuple(result.columns) == COMPARED:
+def compared_columns(result: RunResult, keep: tuple[str, ...] = COMPARED) -> RunResult:
+    """``result`` reduced to the columns ``keep`` (default those ``write_ideal_tables`` compares, ``COMPARED``;
+    ``result`` itself when it already is)."""
+    if tuple(result.columns) == keep:
         return result
-    names = [c for c in COMPARED if result.has(c)]
+    names = [c for c in keep if result.has(c)]
     data = np.empty((len(result.data), len(names)))
     for k, name in enumerate(names):
         data[:, k] = result[name]

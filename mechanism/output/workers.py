@@ -1,12 +1,14 @@
 """Background processes that take the headline command's fixed output costs off its critical path (issue 11).
 
 ``python -m mechanism run`` spent, after its two runs, about 0.5-0.7 s importing matplotlib, 1.5-2 s drawing
-seven PNGs and 0.4 s importing scipy.interpolate for one cubic-spline resampling, while a run's master loop
-keeps one core busy and leaves the other idle (when the machine is). ``OutputWorkers`` forks a process (or
-two) when the command starts: it imports those modules while the master runs, then resamples the ideal
-counterpart and draws the figures (two workers: a share each, ``SHARES``) while the command writes the CSV
-files. The files are the same bytes as drawn in-process (the same functions, ``plots.plot_run`` and
-``record.resample``, run in another process) and are written atomically as before (``atomic.save_figure``).
+seven PNGs and 0.4 s importing scipy.interpolate for one cubic-spline resampling (now ``mechanism.cosim.spline``),
+while a run's master loop keeps one core busy and leaves the other idle (when the machine is). ``OutputWorkers`` forks a process (or
+two) when the command starts: it imports those modules while the master runs, then draws the figures of the run
+alone while the command writes the run's table and runs the ideal counterpart, and the others while the command
+writes the ideal's table (``results.start_run_plots``, ``finish_outputs``; ``write_outputs``: two workers draw a
+share each, ``SHARES``). A worker receives only the columns the figures read, as raw bytes (``ColumnsOf``: the
+command makes no pickled copy of its tables, issue 11). The files are the same bytes as drawn in-process (the
+same functions, ``plots.plot_run`` and ``record.resample``, run in another process) and are written atomically as before (``atomic.save_figure``).
 
 Robustness: the workers ignore SIGINT (the command decides what an interrupt does: ``run.stop_on_signals``)
 and end when the command's end of their pipe closes (the command died) or at ``close``; an error in a job is
@@ -26,8 +28,11 @@ import sys
 import threading
 import traceback
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 #: the figures each of two workers draws: about equal drawing times (a 2-revolution run with its ideal
 #: counterpart, best of 3: joint force 0.45 s, slider acceleration 0.22, energy 0.17, eccentricity 0.10 against
@@ -36,7 +41,8 @@ SHARES = (("joint_force.png", "slider_acceleration.png", "energy.png", "eccentri
           ("ball_loads.png", "slider_position_error.png", "crank_moment.png"))
 
 #: modules a worker imports while it waits for its first job (the first also resamples)
-IMPORTS = ("mechanism.output.plots", "mechanism.cosim.record", "scipy.interpolate")
+#: (the resampling no longer needs scipy.interpolate: ``mechanism.cosim.spline``, so ~20 MB less per worker)
+IMPORTS = ("mechanism.output.plots", "mechanism.cosim.record", "mechanism.cosim.spline")
 IMPORTS_OTHERS = ("mechanism.output.plots",)
 
 
@@ -58,6 +64,81 @@ def _resample(*args):
 
 
 JOBS = {"plots": _plots, "resample": _resample}
+
+
+@dataclass(frozen=True)
+class ColumnsOf:
+    """The columns ``names`` of a ``RunResult`` as a job's argument: a worker receives them as a RunResult of
+    those columns, sent one column at a time as raw bytes (``Connection.send_bytes``: no pickled copy of the
+    table in the command, issue 11); a job run in-process gets ``result`` itself (or, a function, what it returns:
+    the table read back, given to ``OutputWorkers.result`` once the command has let the table go)."""
+    result: Any
+    names: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class _Columns:
+    """What is pickled of a ``ColumnsOf``; its columns follow the job on the pipe, in this order."""
+    names: tuple[str, ...]
+    rows: int
+    meta: dict
+    status: str
+    message: str
+
+
+def _local(job: str, args: tuple, kwargs: dict):
+    """``job`` run in this process (each ``ColumnsOf`` replaced by its ``RunResult``)."""
+    def own(value):
+        if not isinstance(value, ColumnsOf):
+            return value
+        return value.result() if callable(value.result) else value.result
+    return JOBS[job](*map(own, args), **{key: own(value) for key, value in kwargs.items()})
+
+
+def _pack(args: tuple, kwargs: dict) -> tuple[tuple, dict, list[np.ndarray]]:
+    """``args`` and ``kwargs`` with each ``ColumnsOf`` replaced by its ``_Columns`` header, and the columns to send."""
+    columns = []
+
+    def header(value):
+        if not isinstance(value, ColumnsOf):
+            return value
+        r = value.result
+        columns.extend(r[name] for name in value.names)
+        return _Columns(tuple(value.names), len(r.data), r.meta, r.status, r.message)
+    return tuple(map(header, args)), {key: header(value) for key, value in kwargs.items()}, columns
+
+
+def _unpack(conn, args: tuple, kwargs: dict) -> tuple[tuple, dict]:
+    """The worker's side of ``_pack``: each ``_Columns`` header made a ``RunResult`` of the columns received."""
+    def result(value):
+        return _receive(conn, value) if isinstance(value, _Columns) else value
+    return tuple(map(result, args)), {key: result(value) for key, value in kwargs.items()}
+
+
+def _receive(conn, header: _Columns):
+    """The ``RunResult`` of the columns that follow ``header`` on ``conn`` (a column-major table: each column is
+    received straight into its place)."""
+    from mechanism.cosim.record import RunResult
+    data = np.empty((header.rows, len(header.names)), order="F")
+    for k in range(len(header.names)):
+        size = conn.recv_bytes_into(data[:, k])
+        if size != header.rows * data.itemsize:
+            raise ValueError(f"column {header.names[k]!r}: {size} bytes received, {header.rows * data.itemsize} expected")
+    return RunResult(list(header.names), data, header.meta, header.status, header.message)
+
+
+def _send_answer(conn, answer: tuple) -> None:
+    """``answer`` (``("ok", value)`` or ``("error", exception)``) on ``conn``; a RunResult value as a ``_Columns``
+    header and its columns as raw bytes (no pickled copy of its table on either side)."""
+    from mechanism.cosim.record import RunResult
+    status, value = answer
+    if not isinstance(value, RunResult):
+        conn.send(answer)
+        return
+    args, _, columns = _pack((ColumnsOf(value, tuple(value.columns)),), {})
+    conn.send((status, args[0]))
+    for column in columns:
+        conn.send_bytes(np.ascontiguousarray(column))
 
 
 def _forked(conn, ours, modules) -> None:
@@ -86,11 +167,17 @@ def serve(conn, modules) -> None:
             return
         name, args, kwargs = job
         try:
+            args, kwargs = _unpack(conn, args, kwargs)
+        except Exception:   # noqa: BLE001 - the pipe is out of step: the worker ends, the command draws in-process
+            return
+        try:
             answer = ("ok", JOBS[name](*args, **kwargs))
         except Exception as err:   # noqa: BLE001 - raised again in the command
             answer = ("error", err)
         try:
-            conn.send(answer)
+            _send_answer(conn, answer)
+        except (OSError, ValueError):   # the command has gone
+            return
         except Exception as err:   # noqa: BLE001 - an exception that does not pickle
             conn.send(("error", RuntimeError(f"{type(err).__name__} in output worker: {err}")))
 
@@ -100,8 +187,10 @@ def count() -> int:
     in-process), none on a single-CPU machine (nothing would run beside the master) or in a process with
     other threads (a fork copies only the calling one). One worker moves the
     imports and the CSV writing off the command's path at about the same CPU (the fork inherits numpy;
-    docs/kernels.md); two also halve the drawing but import matplotlib twice, which only pays on an otherwise
-    idle second core (measured slower under load)."""
+    docs/kernels.md); two also share the drawing but import matplotlib twice during the run. Measured at 05:10-05:14
+    UTC (2 cores, load average 2-6 from other jobs; 11 interleaved pairs of the 2-revolution headline command,
+    ``cli.PHASES``): two workers' outputs phase was shorter in 11 of 11 pairs (median ~0.6 s: 1.9 -> 1.3 s), their
+    run phase longer by ~0.2-0.4 s (the second import), the whole command shorter in 8 of 11 (median 0.33 s)."""
     text = os.environ.get("MECHANISM_OUTPUT_WORKERS", "1").strip()
     try:
         n = int(text)
@@ -120,8 +209,9 @@ class OutputWorkers:
 
     A worker is forked (``multiprocessing``'s fork context: no helper process such as a resource tracker) when
     the command starts, before the run loads its FMU or compiled kernels (one thread, numba not imported: checked
-    when this was written); it inherits the modules imported so far (numpy), so it imports only matplotlib and
-    scipy.interpolate. Jobs and answers are pickled over a pipe."""
+    when this was written); it inherits the modules imported so far (numpy), so it imports only matplotlib (and
+    the numpy-only spline). Jobs and answers are pickled over a pipe, but for the columns of ``ColumnsOf`` arguments
+    and of a RunResult answer (raw bytes)."""
 
     def __init__(self, n: int = 1):
         self._procs, self._conns, self._busy = [], [], []
@@ -153,12 +243,19 @@ class OutputWorkers:
         conn = self._conns[k] if k < len(self._conns) else None
         if conn is None or self._busy[k]:
             return False
+        args, kwargs, columns = _pack(args, kwargs)
         try:
             conn.send((job, args, kwargs))
         except (OSError, ValueError):   # it died (a broken pipe)
             self._lost(k)
             return False
         except Exception:   # noqa: BLE001 - the job does not pickle (nothing was sent): it runs in-process
+            return False
+        try:
+            for column in columns:   # a column at a time (a strided one copied alone), written without a copy
+                conn.send_bytes(np.ascontiguousarray(column))
+        except (OSError, ValueError):   # it died: the job runs in-process
+            self._lost(k)
             return False
         self._busy[k] = True
         return True
@@ -168,9 +265,11 @@ class OutputWorkers:
         job (given again as ``job, args, kwargs``) runs in-process."""
         try:
             status, value = self._conns[k].recv()
+            if isinstance(value, _Columns):
+                value = _receive(self._conns[k], value)
         except (EOFError, OSError):
             self._lost(k)
-            return JOBS[job](*args, **kwargs)
+            return _local(job, args, kwargs)
         finally:
             self._busy[k] = False
         if status == "error":
@@ -180,7 +279,7 @@ class OutputWorkers:
     def call(self, k: int, job: str, *args, **kwargs):
         """``job(*args, **kwargs)`` in worker ``k`` (in-process if it is not there)."""
         if not self.submit(k, job, *args, **kwargs):
-            return JOBS[job](*args, **kwargs)
+            return _local(job, args, kwargs)
         return self.result(k, job, *args, **kwargs)
 
     def _lost(self, k: int) -> None:
