@@ -183,15 +183,18 @@ def serve(conn, modules) -> None:
 
 
 def count() -> int:
-    """How many workers a plotting run starts: ``MECHANISM_OUTPUT_WORKERS`` (default 1, at most 2; 0 draws
+    """How many workers a plotting run starts: ``MECHANISM_OUTPUT_WORKERS`` (default 2, at most 2; 0 draws
     in-process), none on a single-CPU machine (nothing would run beside the master) or in a process with
     other threads (a fork copies only the calling one). One worker moves the
     imports and the CSV writing off the command's path at about the same CPU (the fork inherits numpy;
     docs/kernels.md); two also share the drawing but import matplotlib twice during the run. Measured at 05:10-05:14
     UTC (2 cores, load average 2-6 from other jobs; 11 interleaved pairs of the 2-revolution headline command,
     ``cli.PHASES``): two workers' outputs phase was shorter in 11 of 11 pairs (median ~0.6 s: 1.9 -> 1.3 s), their
-    run phase longer by ~0.2-0.4 s (the second import), the whole command shorter in 8 of 11 (median 0.33 s)."""
-    text = os.environ.get("MECHANISM_OUTPUT_WORKERS", "1").strip()
+    run phase longer by ~0.2-0.4 s (the second import), the whole command shorter in 8 of 11 (median 0.33 s). At
+    05:18-05:19 UTC on the quiet machine: 2.86-3.69 s against 3.07-4.47 s wall (4 pairs, two faster in each) and
+    2.99-3.23 s against 2.72-3.53 s (``cli.PHASES``, 3 pairs): so two are the default since 2026-11-26. The
+    command's peak memory is the same (the workers are separate processes; each peaks at ~110 MB)."""
+    text = os.environ.get("MECHANISM_OUTPUT_WORKERS", "2").strip()
     try:
         n = int(text)
     except ValueError:
