@@ -16,3 +16,7 @@ each importing only from the layers below it:
 
 The bearing physics and its FMUs are the separate package ``fmu_bearing``. See docs/architecture.md.
 """
+
+from mechanism.kernel_cache import configure as _configure_kernel_cache
+
+_configure_kernel_cache()   # before numba is imported: a cache keyed by every compiled source (kernel_cache)

@@ -225,3 +225,44 @@ def test_a_worker_that_dies_with_the_run_only_figures_leaves_them_drawn_in_proce
         figures = finish_outputs(early, kept, tmp_path, ideal_counterpart(config, kept), w, drawing)
     assert [os.path.basename(p) for p in figures["plots"]] == list(FIGURES)
     assert all((tmp_path / name).stat().st_size > 0 for name in FIGURES)
+
+
+def test_run_only_figures_redrawn_from_the_csv_keep_the_run_meta(tmp_path):
+    """Should the output worker die, ``start_run_plots``'s fallback reads timeseries.csv back: with the run's
+    meta, status and message (the ball count and the titles come from the meta; a CSV has none)."""
+    from mechanism.cosim.record import RunResult
+    from mechanism.output import results
+    meta = {"config": {"rpm": 600.0, "balls": 12}, "clearance_per_side_m": 1e-5}
+    t = np.linspace(0.0, 1e-3, 11)
+    run = RunResult(["time", "crank_angle", "e_x", "e_y"], np.column_stack([t, t, 0 * t + 1e-6, 0 * t]), meta,
+                    "failed", "a cause")
+    results.write_csv(run, tmp_path / "timeseries.csv")
+
+    class Taker:
+        def submit(self, *args, **kwargs):
+            return True
+    _, fallback = results.start_run_plots(run, tmp_path, Taker())
+    back = fallback.result()
+    assert back.meta == meta and back.status == "failed" and back.message == "a cause"
+    assert np.allclose(back["e_x"], run["e_x"], rtol=1e-14)
+
+
+def test_a_table_written_first_leaves_no_earlier_run_beside_it(tmp_path):
+    """``write_run_table`` writes timeseries.csv before the ideal counterpart runs: an earlier run's
+    summary.json and ideal_timeseries.csv go first (with plots, its figures too), so a run stopped in between
+    leaves no mix of two runs in the folder."""
+    from mechanism.output import results
+    for name in ("summary.json", "ideal_timeseries.csv", "eccentricity.png"):
+        (tmp_path / name).write_text("an earlier run")
+    t = np.linspace(0.0, 1e-3, 11)
+    from mechanism.cosim.record import BASE_COLUMNS
+    names = list(dict.fromkeys(["time", "crank_angle", *BASE_COLUMNS]))
+    run = RunResult(names, np.column_stack([t] * len(names)), {})
+    results.write_run_table(run, tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["eccentricity.png", "timeseries.csv"]
+
+    class Taker:
+        def submit(self, *args, **kwargs):
+            return True
+    results.start_run_plots(run, tmp_path, Taker())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["timeseries.csv"]

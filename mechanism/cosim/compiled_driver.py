@@ -57,7 +57,7 @@ def cached() -> bool:
     """True if ``compiled_loop.run_steps`` is compiled in this process or numba's disk cache has it for the
     current source (numba's index of the function, valid for this file's timestamp); False if the first chunk
     will compile it (the first run after installing or changing the kernels: tens of seconds)."""
-    if cl.run_steps.overloads:
+    if getattr(cl.run_steps, "overloads", None):   # (a plain function under NUMBA_DISABLE_JIT: nothing to compile)
         return True
     try:   # numba's cache index (private API): {} when missing or stale
         return bool(cl.run_steps._cache._cache_file._load_index())

@@ -228,11 +228,18 @@ def start_run_plots(result: RunResult, out: Path, workers) -> tuple | None:
     from mechanism.output.workers import ColumnsOf
     if workers is None or len(result["time"]) <= 1:
         return None
+    remove_previous(out, FIGURES)
     names = plotted_columns(result)
     if not workers.submit(0, "plots", ColumnsOf(result, names), Path(out), None, names=RUN_ONLY):
         return None
-    # should the worker die, the figures are drawn in-process from timeseries.csv (written by then)
-    return 0, ColumnsOf(lambda: read_csv(Path(out) / "timeseries.csv"), names)
+    # should the worker die, the figures are drawn in-process from timeseries.csv (written by then), with the
+    # run's meta, status and message (the CSV has none: ball count and titles come from the meta)
+    meta, status, message = result.meta, result.status, result.message
+
+    def reread() -> RunResult:
+        r = read_csv(Path(out) / "timeseries.csv")
+        return RunResult(r.columns, r.data, meta, status, message)
+    return 0, ColumnsOf(reread, names)
 
 
 def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult | None, workers, drawing: tuple,
@@ -290,8 +297,22 @@ def write_run_table(result: RunResult, out: Path) -> dict:
     run's table can then be let go, ``compared_columns`` kept, before the ideal counterpart runs: issue 11).
     If the CSV cannot be written, summary.json still is, with ``write_error``, and the OSError is raised."""
     figures = summary(result)
+    remove_previous(out)
     _write_csv_or_report(result, out / "timeseries.csv", figures, out)
     return figures
+
+
+#: what a run writes after its timeseries.csv when the table goes first (``write_run_table``)
+WRITTEN_LATER = ("summary.json", "ideal_timeseries.csv")
+
+
+def remove_previous(out: Path, also: tuple[str, ...] = ()) -> None:
+    """Remove an earlier run's ``WRITTEN_LATER`` files (and ``also``) from ``out`` before this run's
+    timeseries.csv is written ahead of them: a run stopped in between (killed, the ideal counterpart failing)
+    leaves its own files only, never a mix with an earlier run's."""
+    for name in WRITTEN_LATER + tuple(also):
+        with contextlib.suppress(FileNotFoundError):
+            (Path(out) / name).unlink()
 
 
 #: the run's columns compared with the ideal counterpart's in summary.json (``write_ideal_tables``)

@@ -1,0 +1,57 @@
+"""Where numba keeps the compiled kernels: a folder keyed by the source of every compiled module.
+
+numba's disk cache (``@njit(cache=True)``) checks only the decorated function's own file: a kernel that calls
+into another module (``compiled_loop.run_steps`` into the force law, the multibody kernels, the FMU's calls)
+would load its old machine code after an edit of that other module alone, and a run would give the old
+numbers with exit status 0. So the cache folder is named after a SHA-256 over every ``mechanism`` source that
+compiles with numba (the files that mention ``njit``): any edit of any of them starts a fresh cache, which the
+first run fills (docs/kernels.md, "Caching").
+
+``configure`` runs when ``mechanism`` is imported, before numba is: the folder is
+``$NUMBA_CACHE_DIR/mechanism-<key>`` if the user set ``NUMBA_CACHE_DIR``, else
+``mechanism/__pycache__/numba/mechanism-<key>``; child processes inherit it unchanged. An unwritable folder
+makes numba fall back to its own locations (the per-file check then applies again).
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import sys
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent
+PREFIX = "mechanism-"
+
+
+def sources() -> list[Path]:
+    """The package's modules that compile with numba, in a fixed order."""
+    return sorted(p for p in PACKAGE.rglob("*.py") if "njit" in p.read_text(encoding="utf-8", errors="replace"))
+
+
+def key() -> str:
+    """16 hex digits of the SHA-256 over the compiled modules' relative paths and bytes."""
+    h = hashlib.sha256()
+    for path in sources():
+        h.update(path.relative_to(PACKAGE).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
+def folder(environ: dict | None = None) -> Path:
+    """The cache folder for this source (see the module's docstring)."""
+    environ = os.environ if environ is None else environ
+    given = environ.get("NUMBA_CACHE_DIR", "").strip()
+    name = PREFIX + key()
+    if given and Path(given).name == name:       # set by a parent process already
+        return Path(given)
+    return (Path(given) if given else PACKAGE / "__pycache__" / "numba") / name
+
+
+def configure() -> Path:
+    """Point numba's cache at ``folder()`` (the environment for numba's import and for child processes; numba's
+    config too if it is imported already)."""
+    path = folder()
+    os.environ["NUMBA_CACHE_DIR"] = str(path)
+    config = getattr(sys.modules.get("numba"), "config", None)
+    if config is not None:
+        config.CACHE_DIR = str(path)
+    return path
