@@ -37,6 +37,7 @@ def test_numba_uses_the_folder():
     import os
 
     import numba
+
     from mechanism.cosim import law_kernel
     assert numba.config.CACHE_DIR == os.environ["NUMBA_CACHE_DIR"]
     assert os.path.basename(numba.config.CACHE_DIR) == kernel_cache.PREFIX + kernel_cache.key()
