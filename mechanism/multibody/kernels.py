@@ -466,24 +466,19 @@ def _applied(I, R, W):
 
 @njit(cache=True)
 def rhs(tau, y, fm, I, R, L, LR, W, u, dy):
-    """dy/dt = [qd, qdd] with the force joint's force given by the force model fm."""
-    n = I[1]
-    _rotations(y, I, W)
-    _applied(I, R, W)
+    """dy/dt = [qd, qdd] with the force joint's force given by the force model fm: ``stage_inputs``, the force
+    at those inputs, ``stage_derivative``."""
+    stage_inputs(y, I, R, L, LR, W, u)
+    fx = fy = 0.0
     if L[0] == 1:
-        _link_inputs(y, I, L, LR, W, u)
         fx, fy = force_of_model(fm, tau, u[0], u[1], u[2], u[3])
-        _add_link_force(y, I, L, LR, W, u[0], u[1], fx, fy)
-    for i in range(n):
-        dy[i] = y[n + i]
-    _kinematics(y, tau, I, R, W)
-    _solve(y, I, R, W, dy)
+    stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy)
 
 
 @njit(cache=True)
 def stage_inputs(y, I, R, L, LR, W, u):
-    """The first half of ``rhs`` for a force given by the caller (``mechanism.cosim.law_model_kernel``): the
-    rotations and Q^A of y into W and its bearing inputs into u (eq. 10-12)."""
+    """The first half of ``rhs`` (and of ``mechanism.cosim.law_model_kernel``'s stages, whose force the caller
+    gives): the rotations and Q^A of y into W and its bearing inputs into u (eq. 10-12)."""
     _rotations(y, I, W)
     _applied(I, R, W)
     if L[0] == 1:
@@ -493,7 +488,7 @@ def stage_inputs(y, I, R, L, LR, W, u):
 @njit(cache=True)
 def stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy):
     """The second half of ``rhs`` after ``stage_inputs``: dy/dt = [qd, qdd] with the force joint's force (fx, fy)
-    at the inputs u (eq. 20-23), the same arithmetic as ``rhs``."""
+    at the inputs u (eq. 20-23)."""
     n = I[1]
     if L[0] == 1:
         _add_link_force(y, I, L, LR, W, u[0], u[1], fx, fy)
