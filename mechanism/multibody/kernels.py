@@ -359,21 +359,23 @@ def accelerations(q, qd, t, Q, I, R, W, qdd):
 
 
 @njit(cache=True)
-def multipliers(I, W, lam_model):
-    """Lambda of the last solve, in model order."""
-    olam = _layout(I)[3]
+def _in_model_order(I, W, offset, out):
+    """The constraint rows of W from ``offset`` (kernel row order) into ``out`` in model order."""
     otm = H_I + 3 * I[3] + 2 * I[4]
     for k in range(I[2]):
-        lam_model[k] = W[olam + I[otm + k]]
+        out[k] = W[offset + I[otm + k]]
+
+
+@njit(cache=True)
+def multipliers(I, W, lam_model):
+    """Lambda of the last solve, in model order."""
+    _in_model_order(I, W, _layout(I)[3], lam_model)
 
 
 @njit(cache=True)
 def constraints(I, W, phi_model):
     """Phi of the last kinematics evaluation, in model order."""
-    ophi = _layout(I)[0]
-    otm = H_I + 3 * I[3] + 2 * I[4]
-    for k in range(I[2]):
-        phi_model[k] = W[ophi + I[otm + k]]
+    _in_model_order(I, W, _layout(I)[0], phi_model)
 
 
 @njit(cache=True)
