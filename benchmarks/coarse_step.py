@@ -20,6 +20,7 @@ from pathlib import Path
 
 from mechanism.output.results import summary
 from mechanism.run import RunConfig, run
+from mechanism.studies.reproduce.cases import balls_fit
 
 POINTS = ((1200, 8), (900, 8), (600, 8), (300, 8), (1200, 15), (1200, 20))
 
@@ -27,7 +28,7 @@ POINTS = ((1200, 8), (900, 8), (600, 8), (300, 8), (1200, 15), (1200, 20))
 def settings(balls: int) -> dict:
     """The bearing's start values at an operating point (C = 50 N s/m per ball, constant damping)."""
     s = {"damping_model": 1, "damping_coefficient": 50.0, "n_balls": balls}
-    if balls > 8:
+    if not balls_fit(balls):          # 15 and 20 balls overlap on the pitch circle: the paper's hypothetical sets
         s["allow_ball_overlap"] = True
     return s
 
