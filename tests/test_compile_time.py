@@ -78,3 +78,11 @@ def test_warmup_compiles_what_run_steps_calls(tmp_path):
     compiled_again = {name for name in out if name.startswith(loop_side)} - allowed
     assert not compiled_again
     assert "mechanism.cosim.compiled_loop.run_steps" in out
+
+
+def test_a_misspelt_compile_worker_setting_is_refused(monkeypatch):
+    """``MECHANISM_COMPILE_WORKER`` is 0 or 1; anything else ("no", "off") is an error naming it, not "on"."""
+    from mechanism.cosim import compiled_driver
+    monkeypatch.setenv("MECHANISM_COMPILE_WORKER", "no")
+    with pytest.raises(ValueError, match="MECHANISM_COMPILE_WORKER='no'"):
+        compiled_driver.start_warmup()

@@ -70,7 +70,10 @@ def start_warmup() -> subprocess.Popen | None:
     compiled loop's own functions into numba's cache (the same source files, the same ``NUMBA_CACHE_DIR``) while
     this process compiles the kernels; None when cached, with ``MECHANISM_COMPILE_WORKER=0`` or one CPU, or if the
     process cannot start (this one compiles all then)."""
-    if os.environ.get("MECHANISM_COMPILE_WORKER", "1") == "0" or (os.cpu_count() or 1) < 2 or cached():
+    wanted = os.environ.get("MECHANISM_COMPILE_WORKER", "1").strip()
+    if wanted not in ("0", "1"):
+        raise ValueError(f"MECHANISM_COMPILE_WORKER={wanted!r} must be 0 (no second process) or 1")
+    if wanted == "0" or (os.cpu_count() or 1) < 2 or cached():
         return None
     root = str(Path(__file__).resolve().parents[2])     # the folder holding the mechanism package imported here
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
