@@ -196,22 +196,24 @@ def test_a_full_disk_ends_with_one_line_and_no_truncated_file(tmp_path):
 
 
 def test_concurrent_runs_never_mix_rows(tmp_path):
-    """20 runs into distinct folders and 5 into one: every folder holds the files of one run; the runs
-    into a folder in use are refused (exit 1, naming the lock), not mixed."""
+    """8 runs into distinct folders and 4 into one, all started at once (on 2 cores: 6 runs per core, each
+    overlapping the others from start to end): every folder holds the files of one run; the runs into a folder in
+    use are refused (exit 1, naming the lock), not mixed."""
+    distinct, shared = 8, 4
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     args = ["--joint", "ideal", "--revs", "0.1", "--quiet", "--no-plots"]
     procs = [subprocess.Popen([sys.executable, "-m", "mechanism", "run", *args, "--rpm", str(600 + k),
                                "--out", str(tmp_path / f"d{k}")], cwd=ROOT, env=env,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for k in range(20)]
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for k in range(distinct)]
     procs += [subprocess.Popen([sys.executable, "-m", "mechanism", "run", *args, "--rpm", str(900 + k),
                                 "--out", str(tmp_path / "same")], cwd=ROOT, env=env,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for k in range(5)]
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for k in range(shared)]
     results = [(p.wait(timeout=600), p.stderr.read()) for p in procs]
-    for k in range(20):
+    for k in range(distinct):
         assert results[k][0] == 0, results[k][1]
         s = consistent(tmp_path / f"d{k}")
         assert s["meta"]["config"]["rpm"] == 600 + k
-    same = results[20:]
+    same = results[distinct:]
     assert any(code == 0 for code, _ in same)
     for code, err in same:
         assert code == 0 or (code == 1 and "in use" in err), err

@@ -47,11 +47,19 @@ def cmd_generate(args) -> int:
 
 
 def build_fmus(out_dir: str | Path, max_balls: int | None = None, verbose: bool = True) -> dict[str, Path]:
-    """Build BallBearing.fmu and SliderCrank.fmu into ``out_dir``; {model name: path}."""
+    """BallBearing.fmu and SliderCrank.fmu in ``out_dir``, each built unless the one there was built from the
+    current sources with the same options (``build_fmu.is_fresh``); {model name: path}."""
     import build_fmu
-    kwargs = {} if max_balls is None else {"max_balls": max_balls}
-    fmus = dict(build_fmu.build(out_dir, names=["BallBearing"], verbose=verbose, **kwargs))
-    fmus["SliderCrank"] = build_fmu.build(out_dir, names=["SliderCrank"], verbose=verbose)["SliderCrank"]
+    fmus = {}
+    for name, balls in (("BallBearing", max_balls), ("SliderCrank", None)):
+        kwargs = {} if balls is None else {"max_balls": balls}
+        path = Path(out_dir) / f"{name}.fmu"
+        if build_fmu.is_fresh(path, name, **kwargs):
+            if verbose:
+                print(f"{path} is up to date (built from the current sources)")
+            fmus[name] = path
+        else:
+            fmus[name] = build_fmu.build(out_dir, names=[name], verbose=verbose, **kwargs)[name]
     return fmus
 
 
