@@ -4,9 +4,9 @@ compile, on two cores).
 
 ``compiled_driver.start_warmup`` starts ``python -m mechanism.cosim.warmup`` when ``run_steps`` is not cached. The
 run's process compiles ``prepare``, ``max_violation`` and ``finish`` (and their callees) for ``CouplingLoop.start``
-and the first sample; this process compiles, stage by stage (``STAGES``), the energy account's kernels (which the
-run calls from Python next), the loop's own functions, ``kernels.advance`` (by then the callees it shares with
-``finish`` are mostly in the cache) and the component's exchange, printing each stage's name when it is done. The
+and the first sample, then the energy account's kernels; this process compiles, stage by stage (``STAGES``), the
+loop's own functions, ``kernels.advance`` (by then the callees it shares with ``finish`` are mostly in the cache)
+and the component's exchange, printing each stage's name when it is done (about as long on an idle machine). The
 run waits (``compiled_driver.finish_warmup``) only for the stages its step needs (``needed``: an FMU run's step has
 no in-process law, and only law-model's has law-model's functions), ends this process then, and its compile of
 ``run_steps`` loads these functions from the cache instead of compiling them.
@@ -73,16 +73,18 @@ LAW_MODEL = (
     (lmk.onset_corrections, (_F1, _F1, _I, _F2, _F1, _F2)),
     (lmk.advance, (_F1, _F, _F, _I, _F, _F1, _F1, _F1, _F1, _F2, _F2, _I1, _F1, _I1, _F1, _F1, _F1, _F1, _F1, _F2)),
 )
-#: the stages in the order compiled: (name, functions)
-STAGES = (("energy", ENERGY), ("loop", LOOP), ("advance", ADVANCE), ("fmu", FMU), ("in-process", IN_PROCESS),
-          ("law-model", LAW_MODEL))
+#: the stages in the order compiled: (name, functions). The energy account's kernels come last: the run's process
+#: compiles them itself after ``finish`` (about when this process is done with the step's stages), so a first run
+#: does not wait for them; they are here for a warm-up run by itself (``python -m mechanism.cosim.warmup``)
+STAGES = (("loop", LOOP), ("advance", ADVANCE), ("fmu", FMU), ("in-process", IN_PROCESS), ("law-model", LAW_MODEL),
+          ("energy", ENERGY))
 #: the functions every run's step calls (the rest: ``needed``)
 SIGNATURES = tuple(sig for _, stage in STAGES for sig in stage)
 
 
 def needed(fmu: bool, law_model: bool) -> list[str]:
     """The stages the step of a run needs: through an FMU or in-process, with law-model's or another scheme."""
-    return ["energy", "loop", "advance", "fmu" if fmu else "in-process"] + (["law-model"] if law_model else [])
+    return ["loop", "advance", "fmu" if fmu else "in-process"] + (["law-model"] if law_model else [])
 
 
 def main(names: list[str] | None = None) -> None:
