@@ -466,7 +466,7 @@ def _applied(I, R, W):
         W[oQ + i] = R[o + i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rhs(tau, y, fm, I, R, L, LR, W, u, dy):
     """dy/dt = [qd, qdd] with the force joint's force given by the force model fm: ``stage_inputs``, the force
     at those inputs, ``stage_derivative``."""
@@ -477,7 +477,7 @@ def rhs(tau, y, fm, I, R, L, LR, W, u, dy):
     stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def stage_inputs(y, I, R, L, LR, W, u):
     """The first half of ``rhs`` (and of ``mechanism.cosim.law_model_kernel``'s stages, whose force the caller
     gives): the rotations and Q^A of y into W and its bearing inputs into u (eq. 10-12)."""
@@ -487,7 +487,7 @@ def stage_inputs(y, I, R, L, LR, W, u):
         _link_inputs(y, I, L, LR, W, u)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy):
     """The second half of ``rhs`` after ``stage_inputs``: dy/dt = [qd, qdd] with the force joint's force (fx, fy)
     at the inputs u (eq. 20-23)."""
@@ -645,7 +645,7 @@ def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t,
         fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, kinetic_energy(y, I, R), n)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, ke, n):
     """Write the probes of a sample: row[probes[k, 0]] = scale[k] * source[probes[k, 2]] with source
     probes[k, 1]: 0 q, 1 qd, 2 qdd, 3 lambda (model order), 4 bearing inputs of y, 5 force (index 0 x,
