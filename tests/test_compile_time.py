@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mechanism.cosim import compiled_driver, warmup
+from mechanism.cosim import compiled_driver
 from mechanism.run import RunConfig, run
 
 ROOT = Path(__file__).resolve().parents[1]

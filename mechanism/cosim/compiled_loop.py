@@ -23,7 +23,9 @@ tests/test_compiled_loop.py and tests/test_compiled_cosim.py, with the same orde
   columns (``EnergyAccount.update`` with the integrals), the ring speeds sent.
 
 The exchange history is an array ``past`` (3 x 13, the fields of ``Exchanged`` in order) with its count (at most
-the scheme's ``history``).
+the scheme's ``history``). ``run_steps``' arguments ``P`` (the in-process law) and ``LM`` (law-model's state) are
+None for an FMU and for the other schemes: numba prunes the branches on them before typing, so each run compiles
+(and loads) only its own component's and scheme's functions.
 The driver (``mechanism.cosim.compiled_driver``) packs the Python objects into arrays and back.
 """
 from __future__ import annotations
@@ -80,7 +82,7 @@ def _copy_rows(dst, src, rows):
             dst[i, j] = src[i, j]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def sym_eig_max(a, b, c):
     """Largest eigenvalue of [[a, b], [b, c]] (``master._sym_eig_max``)."""
     return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
@@ -98,7 +100,7 @@ def substeps(h, x, mobility, limit, cap):
     return max(1, min(cap, math.ceil(x)))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _linear(x, e_x, e_y, v_x, v_y):
     """``coupling.jacobian._linear``: F_x + K (e - e_x) + C (v - v_x) about the exchange x."""
     dx, dy, dvx, dvy = e_x - x[1], e_y - x[2], v_x - x[3], v_y - x[4]

@@ -366,7 +366,7 @@ def _in_model_order(I, W, offset, out):
         out[k] = W[offset + I[otm + k]]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def multipliers(I, W, lam_model):
     """Lambda of the last solve, in model order."""
     _in_model_order(I, W, _layout(I)[3], lam_model)
@@ -446,7 +446,7 @@ def _add_link_force(y, I, L, LR, W, ex, ey, fx, fy):
     _add_point_force(W, oQ, y, nb, jb, -fx, -fy, xj, yj)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def force_of_model(fm, tau, ex, ey, vx, vy):
     """F(tau, e, v) = F0 + a1 s + a2 s^2 + K (e - e0) + C (v - v0) (``ForceModel``)."""
     s = tau - fm[0]
@@ -456,7 +456,7 @@ def force_of_model(fm, tau, ex, ey, vx, vy):
 
 
 # ---------------------------------------------------------------------------------- the step
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _applied(I, R, W):
     """Q^A of gravity [N, N, N m] into Q in W."""
     n, K, A = I[1], I[3], I[4]
@@ -500,7 +500,7 @@ def stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy):
     _solve(y, I, R, W, dy)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def powers(y, I, R, W):
     """The powers [W] at the state y whose right-hand side was just evaluated (kinematics, lambda and Q in W):
     of the drivers lambda . Phi_t (the rheonomic constraints' work, e.g. the crank's M omega), of the applied
@@ -521,7 +521,7 @@ def powers(y, I, R, W):
     return drive, app, total - app
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _stage_row(stages, row, y, u, nb, L):
     """The energy account's record of a stage state: its bearing inputs u and the ring angles (journal, housing)."""
     for i in range(6):
@@ -673,7 +673,7 @@ def fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, ke, n):
         row[c] = scale[k] * v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def kinetic_energy(y, I, R):
     """T = qd^T M qd / 2 [J] of the state y = [q, qd]."""
     n, K, A = I[1], I[3], I[4]
