@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -85,3 +86,20 @@ def test_a_misspelt_compile_worker_setting_is_refused(monkeypatch):
     monkeypatch.setenv("MECHANISM_COMPILE_WORKER", "no")
     with pytest.raises(ValueError, match="MECHANISM_COMPILE_WORKER='no'"):
         compiled_driver.start_warmup()
+
+
+def test_the_run_waits_only_for_the_stages_its_step_needs(monkeypatch):
+    """``finish_warmup`` returns once the worker has printed the stages the step of the last ``CompiledLoop`` needs
+    (an FMU run with jacobian-implicit: not the in-process law's nor law-model's) and ends the worker then."""
+    from mechanism.cosim import warmup
+    monkeypatch.setattr(compiled_driver, "_variant", (True, False))
+    assert warmup.needed(True, False) == ["loop", "advance", "fmu"]
+    worker = "import time\nfor s in ('loop', 'advance', 'fmu'):\n    print(s, flush=True)\ntime.sleep(60)"
+    process = compiled_driver.collect_stages(subprocess.Popen([sys.executable, "-c", worker],
+                                                              stdout=subprocess.PIPE, text=True))
+    start = time.monotonic()
+    compiled_driver.finish_warmup(process, timeout=50.0)
+    assert time.monotonic() - start < 30.0
+    assert process.poll() is not None and process.done == {"loop", "advance", "fmu"}
+    monkeypatch.setattr(compiled_driver, "_variant", (False, True))     # in-process law-model: it would wait
+    assert set(warmup.needed(False, True)) == {"loop", "advance", "in-process", "law-model"}

@@ -106,6 +106,11 @@ def start_warmup() -> subprocess.Popen | None:
                                    text=True)
     except OSError:
         return None
+    return collect_stages(process)
+
+
+def collect_stages(process: subprocess.Popen) -> subprocess.Popen:
+    """Collect the stage names ``process`` prints (one a line, text mode) into ``process.done``, by a thread."""
     process.done = set()
 
     def collect() -> None:
