@@ -59,8 +59,8 @@ N_FSET = 15
 #: int settings (``iset``): max substeps, pass limit, predict, iterative, secant, energy, theta_j, theta_i,
 #: contact law present, constraints (m), end evaluation valid (in/out), component kind (``component_call``),
 #: drift history, entries of past (in/out), force model (``MODELS``), Jacobi ordering, the scheme's history,
-#: the run's last step (always recorded, also off the output stride), the law-model scheme (its law: ``PC``), its
-#: onset corrections on
+#: the run's last step (always recorded, also off the output stride), the law-model scheme (its law: ``PC``; the
+#: step itself goes by its argument ``LM``), its onset corrections on
 N_ISET = 20
 #: force models (iset[14]): the interface-Jacobian ones (``drift_model``, ``trial_model``), ``hold_model``'s
 MODELS = {"jacobian": 0, "zoh": 1, "extrap1": 2, "extrap2": 3}
