@@ -14,9 +14,12 @@ compiled for each (more than one: argument types that differ between calls, e.g.
 argument).
 
     python benchmarks/compile.py [--command "run --quiet --no-plots"] [--env default MECHANISM_COMPILE_WORKER=0]
-                                 [--repeat 1] [--events]
+                                 [--repeat 1] [--events] [--checkouts DIR [DIR ...]]
 
-Runs against whatever ``mechanism`` is on the path (PYTHONPATH=<checkout>).
+Runs against whatever ``mechanism`` is on the path (PYTHONPATH=<checkout>), or, with ``--checkouts``, against each
+of those folders in turn (PYTHONPATH and working folder, e.g. a copy of an earlier commit with its dist/ FMUs),
+interleaved with the settings. Each cold run's cache is counted: the compiled functions (numba's index files) and
+their specialisations (the index entries), i.e. what a warm run may load.
 """
 from __future__ import annotations
 
@@ -61,17 +64,33 @@ def _child(out: str, argv: list[str]) -> None:
         Path(out).write_text(json.dumps(rows))
 
 
-def timed(argv: list[str], env: dict[str, str], events: str | None = None) -> tuple[float, float, int]:
+def timed(argv: list[str], env: dict[str, str], events: str | None = None,
+          cwd: str | None = None) -> tuple[float, float, int]:
     """(wall s, child CPU s, exit status) of ``python -m mechanism argv`` (or the event-recording child)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    cmd = ([sys.executable, __file__, "--child", events, "--", *argv] if events
+    cmd = ([sys.executable, str(Path(__file__).resolve()), "--child", events, "--", *argv] if events
            else [sys.executable, "-m", "mechanism", *argv])
     start = time.perf_counter()
-    status = subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, check=False).returncode
+    status = subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, check=False, cwd=cwd).returncode
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return wall, cpu, status
+
+
+def cache_count(cache: str) -> tuple[int, int]:
+    """(functions, specialisations) in a numba cache folder: its index files and their entries."""
+    import pickle
+    functions = entries = 0
+    for index in Path(cache).rglob("*.nbi"):
+        functions += 1
+        try:
+            with open(index, "rb") as f:
+                pickle.load(f)                      # numba's version
+                entries += len(pickle.loads(f.read())[1])   # (source stamp, {key: data file})
+        except Exception:  # noqa: BLE001  (another numba's layout: count the function once)
+            entries += 1
+    return functions, entries
 
 
 def report_events(path: str, top: int) -> None:
@@ -94,24 +113,31 @@ def main() -> int:
     p.add_argument("--repeat", type=int, default=1)
     p.add_argument("--events", action="store_true", help="record and print the cold run's compile events")
     p.add_argument("--top", type=int, default=25)
+    p.add_argument("--checkouts", nargs="+", default=[None], help="folders to run (PYTHONPATH and working folder)")
     a = p.parse_args()
     print(f"load average {os.getloadavg()}")
     for r in range(a.repeat):
-        for setting in a.env:
-            with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
-                env = dict(os.environ, NUMBA_CACHE_DIR=cache)
-                env.pop("NUMBA_OPT", None)
-                if setting != "default":
-                    env.update(item.split("=", 1) for item in setting.split(","))
-                argv = [*shlex.split(a.command), "--out", out]
-                events = str(Path(out) / "events.json") if a.events else None
-                cold = timed(argv, env, events)
-                warm = timed(argv, env)
-                print(f"[{r + 1}] {setting}: cold {cold[0]:6.1f} s wall, {cold[1]:6.1f} s CPU (exit {cold[2]}); "
-                      f"warm {warm[0]:5.2f} s wall, {warm[1]:5.2f} s CPU (exit {warm[2]}); "
-                      f"load {os.getloadavg()[0]:.1f}", flush=True)
-                if events:
-                    report_events(events, a.top)
+        for checkout in a.checkouts:
+            for setting in a.env:
+                with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
+                    env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+                    env.pop("NUMBA_OPT", None)
+                    if checkout is not None:
+                        env["PYTHONPATH"] = str(Path(checkout).resolve())
+                    if setting != "default":
+                        env.update(item.split("=", 1) for item in setting.split(","))
+                    argv = [*shlex.split(a.command), "--out", out]
+                    events = str(Path(out) / "events.json") if a.events else None
+                    cold = timed(argv, env, events, checkout)
+                    functions, entries = cache_count(cache)
+                    warm = timed(argv, env, None, checkout)
+                    name = setting if checkout is None else f"{checkout} {setting}"
+                    print(f"[{r + 1}] {name}: cold {cold[0]:6.1f} s wall, {cold[1]:6.1f} s CPU (exit {cold[2]}); "
+                          f"warm {warm[0]:5.2f} s wall, {warm[1]:5.2f} s CPU (exit {warm[2]}); "
+                          f"{functions} functions cached ({entries} specialisations); "
+                          f"load {os.getloadavg()[0]:.1f}", flush=True)
+                    if events:
+                        report_events(events, a.top)
     return 0
 
 

@@ -6,12 +6,13 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from mechanism.cosim import compiled_driver, warmup
+from mechanism.cosim import compiled_driver
 from mechanism.run import RunConfig, run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,7 +66,7 @@ print("\\n".join(names))
 def test_warmup_compiles_what_run_steps_calls(tmp_path):
     """In a fresh cache, after ``mechanism.cosim.warmup``, the run's compile of ``run_steps`` loads the loop's
     functions and their callees from the cache (the warm-up's argument types are run_steps' own): the run compiles
-    only run_steps, the multibody kernels and what it calls from Python before the first chunk."""
+    only run_steps and the multibody kernels it calls from Python before the first chunk."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), PYTHONPATH=str(ROOT), MECHANISM_COMPILE_WORKER="0")
     subprocess.run([sys.executable, "-m", "mechanism.cosim.warmup"], env=env, cwd=ROOT, check=True)
     out = subprocess.run([sys.executable, "-c", _COMPILED_IN_RUN], env=env, cwd=ROOT, capture_output=True,
@@ -73,8 +74,7 @@ def test_warmup_compiles_what_run_steps_calls(tmp_path):
     loop_side = ("mechanism.cosim.compiled_loop.", "mechanism.cosim.component_call.",
                  "mechanism.cosim.component_kernel.", "mechanism.cosim.fmu_native.", "mechanism.cosim.law_kernel.",
                  "mechanism.cosim.law_model_kernel.")
-    allowed = {"mechanism.cosim.compiled_loop.run_steps"} | {
-        f"{f.py_func.__module__}.{f.py_func.__qualname__}" for f, _ in warmup.RUN_COMPILES}
+    allowed = {"mechanism.cosim.compiled_loop.run_steps"}
     compiled_again = {name for name in out if name.startswith(loop_side)} - allowed
     assert not compiled_again
     assert "mechanism.cosim.compiled_loop.run_steps" in out
@@ -86,3 +86,20 @@ def test_a_misspelt_compile_worker_setting_is_refused(monkeypatch):
     monkeypatch.setenv("MECHANISM_COMPILE_WORKER", "no")
     with pytest.raises(ValueError, match="MECHANISM_COMPILE_WORKER='no'"):
         compiled_driver.start_warmup()
+
+
+def test_the_run_waits_only_for_the_stages_its_step_needs(monkeypatch):
+    """``finish_warmup`` returns once the worker has printed the stages the step of the last ``CompiledLoop`` needs
+    (an FMU run with jacobian-implicit: not the in-process law's nor law-model's) and ends the worker then."""
+    from mechanism.cosim import warmup
+    monkeypatch.setattr(compiled_driver, "_variant", (True, False))
+    assert warmup.needed(True, False) == ["loop", "advance", "fmu"]
+    worker = "import time\nfor s in ('loop', 'advance', 'fmu'):\n    print(s, flush=True)\ntime.sleep(60)"
+    process = compiled_driver.collect_stages(subprocess.Popen([sys.executable, "-c", worker],
+                                                              stdout=subprocess.PIPE, text=True))
+    start = time.monotonic()
+    compiled_driver.finish_warmup(process, timeout=50.0)
+    assert time.monotonic() - start < 30.0
+    assert process.poll() is not None and process.done == {"loop", "advance", "fmu"}
+    monkeypatch.setattr(compiled_driver, "_variant", (False, True))     # in-process law-model: it would wait
+    assert set(warmup.needed(False, True)) == {"loop", "advance", "in-process", "law-model"}

@@ -12,17 +12,20 @@ import math
 import os
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from numba import types
 
 from fmu_bearing.ball_bearing import BearingInputError
 from mechanism.cosim import compiled_loop as cl
 from mechanism.cosim import component_call as cc
 from mechanism.cosim import component_kernel as ck
 from mechanism.cosim import fmu_native
+from mechanism.cosim import law_model_kernel as lmk
 from mechanism.cosim.coupling import Exchanged
 from mechanism.cosim.endpoints import ExchangeError
 from mechanism.cosim.energy import ENERGY_COLUMNS
@@ -53,23 +56,43 @@ def component_kind(endpoint) -> int | None:
     return None
 
 
-def cached() -> bool:
-    """True if ``compiled_loop.run_steps`` is compiled in this process or numba's disk cache has it for the
-    current source (numba's index of the function, valid for this file's timestamp); False if the first chunk
-    will compile it (the first run after installing or changing the kernels: tens of seconds)."""
-    if getattr(cl.run_steps, "overloads", None):   # (a plain function under NUMBA_DISABLE_JIT: nothing to compile)
+#: the step of the last ``CompiledLoop`` made: (through an FMU, law-model's), i.e. ``run_steps``' arguments ``P``
+#: and ``LM`` None or not (its compiled specialisation); None before the first
+_variant: tuple[bool, bool] | None = None
+
+
+def _is_variant(sig, want: tuple[bool, bool] | None) -> bool:
+    """True if the argument types ``sig`` of ``run_steps`` are the step ``want`` (None: any)."""
+    if want is None:
         return True
-    try:   # numba's cache index (private API): {} when missing or stale
-        return bool(cl.run_steps._cache._cache_file._load_index())
+    names = list(cl.run_steps.py_func.__code__.co_varnames)
+    none = tuple(isinstance(sig[names.index(name)], types.NoneType) for name in ("P", "LM"))
+    return none == (want[0], not want[1])
+
+
+def cached() -> bool:
+    """True if ``compiled_loop.run_steps`` for the step of the last ``CompiledLoop`` made (any step before one is
+    made) is compiled in this process or in numba's disk cache for the current source (numba's index of the
+    function, valid for this file's timestamp); False if the first chunk will compile it (the first run after
+    installing or changing the kernels, or the first of another component or scheme: seconds)."""
+    overloads = getattr(cl.run_steps, "overloads", None)
+    if overloads is None:   # (a plain function under NUMBA_DISABLE_JIT: nothing to compile)
+        return True
+    want = _variant
+    if any(_is_variant(sig, want) for sig in overloads):
+        return True
+    try:   # numba's cache index (private API): {} when missing or stale; keys (argument types, target, source)
+        return any(_is_variant(key[0], want) for key in cl.run_steps._cache._cache_file._load_index())
     except Exception:   # noqa: BLE001  (another numba: assume cached, the bar shows its ETA as before)
         return True
 
 
 def start_warmup() -> subprocess.Popen | None:
     """On a first run (``cached`` False): start ``mechanism.cosim.warmup`` in a second process, which compiles the
-    compiled loop's own functions into numba's cache (the same source files, the same ``NUMBA_CACHE_DIR``) while
-    this process compiles the kernels; None when cached, with ``MECHANISM_COMPILE_WORKER=0`` or one CPU, or if the
-    process cannot start (this one compiles all then)."""
+    loop's own functions and the kernels the run calls later into numba's cache (the same source files, the same
+    ``NUMBA_CACHE_DIR``) while this process compiles the kernels it calls first; None when cached, with
+    ``MECHANISM_COMPILE_WORKER=0`` or one CPU, or if the process cannot start (this one compiles all then). The
+    stages it reports done (its output lines) are collected in ``process.done`` by a thread."""
     wanted = os.environ.get("MECHANISM_COMPILE_WORKER", "1").strip()
     if wanted not in ("0", "1"):
         raise ValueError(f"MECHANISM_COMPILE_WORKER={wanted!r} must be 0 (no second process) or 1")
@@ -78,23 +101,42 @@ def start_warmup() -> subprocess.Popen | None:
     root = str(Path(__file__).resolve().parents[2])     # the folder holding the mechanism package imported here
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
     try:
-        return subprocess.Popen([sys.executable, "-m", "mechanism.cosim.warmup"], cwd=root, env=env,
-                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        process = subprocess.Popen([sys.executable, "-m", "mechanism.cosim.warmup"], cwd=root, env=env,
+                                   stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                   text=True)
     except OSError:
         return None
+    return collect_stages(process)
+
+
+def collect_stages(process: subprocess.Popen) -> subprocess.Popen:
+    """Collect the stage names ``process`` prints (one a line, text mode) into ``process.done``, by a thread."""
+    process.done = set()
+
+    def collect() -> None:
+        for line in process.stdout:
+            process.done.add(line.strip())
+
+    process.reader = threading.Thread(target=collect, daemon=True)
+    process.reader.start()
+    return process
 
 
 def finish_warmup(process: subprocess.Popen | None, timeout: float = 300.0,
                   poll: Callable[[], None] | None = None) -> None:
-    """Wait for ``start_warmup``'s process (at most ``timeout`` s; 0: not at all), calling ``poll`` (e.g. the run's
-    signal check, which may raise) every 0.5 s; end the process if it still runs then."""
+    """Wait for ``start_warmup``'s process (at most ``timeout`` s; 0: not at all) until it has compiled the stages
+    the step of the last ``CompiledLoop`` needs (``warmup.needed``; all of them before one is made), calling
+    ``poll`` (e.g. the run's signal check, which may raise) every 0.1 s; end the process if it still runs then
+    (the stages it was still compiling are needed by other components or schemes only)."""
     if process is None:
         return
+    from mechanism.cosim import warmup
+    names = warmup.needed(*_variant) if _variant is not None else [name for name, _ in warmup.STAGES]
     deadline = time.monotonic() + timeout
     try:
-        while True:
+        while not set(names) <= getattr(process, "done", set()):
             try:
-                process.wait(min(0.5, max(0.0, deadline - time.monotonic())))
+                process.wait(min(0.1, max(0.0, deadline - time.monotonic())))
                 return
             except subprocess.TimeoutExpired:
                 if time.monotonic() >= deadline:
@@ -105,6 +147,11 @@ def finish_warmup(process: subprocess.Popen | None, timeout: float = 300.0,
         if process.poll() is None:
             process.kill()
             process.wait()
+        reader = getattr(process, "reader", None)
+        if reader is not None:      # at the end of the process's output now
+            reader.join(1.0)
+        if process.stdout is not None and (reader is None or not reader.is_alive()):
+            process.stdout.close()
 
 
 def eligible(loop) -> bool:
@@ -142,8 +189,8 @@ class CompiledLoop:
             self.H = np.zeros(fmu_native.SLOTS, np.int64)
             none = np.zeros(0, np.uint32)
             self.refs = fmu_native.References(none, none, none, none, none)
-        else:
-            self.P, self.cs = np.zeros(0), np.zeros(0)
+        else:   # P None: the step compiled without the in-process law (``compiled_loop.run_steps``)
+            self.P, self.cs = None, np.zeros(0)
             self.H, self.refs = fmu_native.endpoint_handle(endpoint), fmu_native.endpoint_references(endpoint)
         law = loop.contact_law
         self.PC = pack_bearing(law) if law is not None else np.zeros(0)
@@ -158,12 +205,16 @@ class CompiledLoop:
             _, self.PE, offset = acct._stage_kernel
             fset[8:13] = (acct._start, offset, acct.bearing.params.cage_angle_start, *acct._angles0)
         else:
-            self.PE = self.P
+            self.PE = np.zeros(0)
         fset[13] = endpoint.bearing.eccentricity_limit if self.kind == cc.IN_PROCESS else math.inf
         # law-model with its law (bound at ``CouplingLoop.start``: the contact law, ``PC``); without, jacobian-implicit
         self.law_model = bool(getattr(scheme, "uses_law", False) and getattr(scheme, "law", None) is not None)
         if self.law_model:
             fset[14] = scheme.resolution
+        # law-model's state (zeroed by each chunk), or None: the step compiled without law-model's
+        self.LM = np.zeros(lmk.LM_SIZE) if self.law_model else None
+        global _variant
+        _variant = (self.P is None, self.law_model)
         self.fset = fset
         iset = np.zeros(cl.N_ISET, np.int64)
         iset[0:10] = (settings.max_substeps, max(2, settings.max_iterations), settings.iterate_where_needed,
@@ -212,7 +263,7 @@ class CompiledLoop:
                          loop._probe_scale, loop._react, rec.data, self.cols, self.P, self.cs, self.H,
                          self.refs.inputs, self.refs.coupling, self.refs.real_samples, self.refs.int_samples,
                          self.refs.bool_samples, self.PC, self.PE, self.past, self.xin, self.xf, self.integrals,
-                         self.counts, self.fset, self.iset, self.sent, self.fail)
+                         self.counts, self.fset, self.iset, self.sent, self.fail, self.LM)
         code = int(self.fail[0])
         if code == cl.OK:
             self.steps_done, self.t = last, last * self.h

@@ -23,7 +23,9 @@ tests/test_compiled_loop.py and tests/test_compiled_cosim.py, with the same orde
   columns (``EnergyAccount.update`` with the integrals), the ring speeds sent.
 
 The exchange history is an array ``past`` (3 x 13, the fields of ``Exchanged`` in order) with its count (at most
-the scheme's ``history``).
+the scheme's ``history``). ``run_steps``' arguments ``P`` (the in-process law) and ``LM`` (law-model's state) are
+None for an FMU and for the other schemes: numba prunes the branches on them before typing, so each run compiles
+(and loads) only its own component's and scheme's functions.
 The driver (``mechanism.cosim.compiled_driver``) packs the Python objects into arrays and back.
 """
 from __future__ import annotations
@@ -35,6 +37,7 @@ from numba import njit
 
 from fmu_bearing.parameters import DAMPING_CONSTANT
 from mechanism.cosim import component_call as cc
+from mechanism.cosim import fmu_native
 from mechanism.cosim import law_model_kernel as lmk
 from mechanism.cosim.energy_kernel import stage_integrals
 from mechanism.cosim.law_kernel import elastic_energy
@@ -56,8 +59,8 @@ N_FSET = 15
 #: int settings (``iset``): max substeps, pass limit, predict, iterative, secant, energy, theta_j, theta_i,
 #: contact law present, constraints (m), end evaluation valid (in/out), component kind (``component_call``),
 #: drift history, entries of past (in/out), force model (``MODELS``), Jacobi ordering, the scheme's history,
-#: the run's last step (always recorded, also off the output stride), the law-model scheme (its law: ``PC``), its
-#: onset corrections on
+#: the run's last step (always recorded, also off the output stride), the law-model scheme (its law: ``PC``; the
+#: step itself goes by its argument ``LM``), its onset corrections on
 N_ISET = 20
 #: force models (iset[14]): the interface-Jacobian ones (``drift_model``, ``trial_model``), ``hold_model``'s
 MODELS = {"jacobian": 0, "zoh": 1, "extrap1": 2, "extrap2": 3}
@@ -79,7 +82,7 @@ def _copy_rows(dst, src, rows):
             dst[i, j] = src[i, j]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def sym_eig_max(a, b, c):
     """Largest eigenvalue of [[a, b], [b, c]] (``master._sym_eig_max``)."""
     return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
@@ -97,7 +100,7 @@ def substeps(h, x, mobility, limit, cap):
     return max(1, min(cap, math.ceil(x)))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _linear(x, e_x, e_y, v_x, v_y):
     """``coupling.jacobian._linear``: F_x + K (e - e_x) + C (v - v_x) about the exchange x."""
     dx, dy, dvx, dvy = e_x - x[1], e_y - x[2], v_x - x[3], v_y - x[4]
@@ -275,10 +278,15 @@ def _release(kind, H, state, counts) -> int:
 
 @njit(cache=True)
 def _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, t, fail, counts) -> bool:
-    """The component's exchange (``component_call.exchange``), counted; False (``fail`` set) if refused."""
-    status = cc.exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out)
+    """The component's exchange (``component_call.exchange``), counted; False (``fail`` set) if refused.
+    ``P`` None: an FMU, called straight through ``fmu_native`` (``component_call.exchange``'s FMU branch): numba
+    prunes the other branch for a None argument, so the in-process law is not compiled into an FMU run's step."""
+    if P is None:
+        status = fmu_native.exchange(H, vr_in, sent, t0, h, vr_out, out)
+    else:
+        status = cc.exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out)
     if status < 0 or status > 1:
-        if kind == cc.IN_PROCESS:
+        if P is not None:
             _fail(fail, np.int64(INPUTS), step, t, sent[0], sent[1], sent[2], sent[3], sent[4], sent[5])
         else:
             _fail(fail, np.int64(COMPONENT), step, t, float(status), float(DO_STEP), 0.0, 0.0, 0.0, 0.0)
@@ -290,7 +298,7 @@ def _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, 
 @njit(cache=True)
 def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, stages, probes, scale, react,
               data, cols, P, cs, H, vr_in, vr_out, vr_real, vr_int, vr_bool, PC, PE, past, xin, xf, integrals,
-              counts, fset, iset, sent, fail):
+              counts, fset, iset, sent, fail, LM):
     """Communication steps ``first`` .. ``last`` from the state y at t = (first - 1) h; returns the state
     reached (the last step's end, or the start of the step that failed: ``fail[0]`` != OK then).
 
@@ -301,6 +309,11 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
     sampled reals, integers and booleans (``fmu_native.endpoint_references``). ``PC``: the contact law locating
     onsets (empty: none); ``PE``: the energy account's law. ``past`` (3 x 13) with iset[13] entries, ``xin`` and
     ``xf``: the history, last inputs and force of the loop (updated in place). ``sent``: the last inputs sent.
+
+    Two arguments may be None, and numba then compiles a step without what they select (it prunes a branch on an
+    argument that is None before typing it): ``P`` None for an FMU (no in-process law), ``LM`` None for a scheme
+    other than law-model; else ``LM`` is law-model's state (``law_model_kernel.LM_SIZE``), zeroed here with its
+    resolution fset[14]. So a run compiles, and a warm run loads, the step of its own component and scheme only.
     """
     mobility, sub_limit, max_cv, tol = fset[0], fset[1], fset[2], fset[3]
     max_sub, limit, predict, iterative, secant = iset[0], iset[1], iset[2] != 0, iset[3] != 0, iset[4] != 0
@@ -310,9 +323,11 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
     model, jacobi, history = iset[14], iset[15] != 0, iset[16]
     nb_c = int(PC[0]) if PC.shape[0] > 0 else 0
     jumps = np.zeros((max(nb_c, 1), 3))
-    lawm, onset_corr = iset[18] != 0, iset[19] != 0    # law-model (law_model_kernel): its state and work arrays
-    LM = np.zeros(lmk.LM_SIZE)
-    LM[18] = fset[14]
+    onset_corr = iset[19] != 0    # law-model (law_model_kernel): its state LM (None: not law-model), work arrays
+    if LM is not None:
+        for i in range(LM.shape[0]):
+            LM[i] = 0.0
+        LM[18] = fset[14]
     lout = np.zeros(10)
     lloads = np.zeros(max(nb_c, 1))
     onsets = np.zeros((max(max_sub, 1), 3))
@@ -341,7 +356,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
         cage_start = 0.0
         if has_law:   # energy.kinematic_cage_angle
             cage_start = fset[5] + ((y[tj] - fset[6]) * PC[11] + (y[ti] - fset[7]) * PC[12])
-        if lawm:
+        if LM is not None:
             lmk.set_cage(LM, PC, cage_start, xin[4], xin[5])
         snap_npast = npast
         state = 0
@@ -370,7 +385,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                     if iterative:    # no iterative Jacobi scheme today; free the step's state as every exit does
                         _release(kind, H, state, counts)
                     return y
-            if lawm:   # LawModel.begin_step, substep_tangent, set_substeps
+            if LM is not None:   # LawModel.begin_step, substep_tangent, set_substeps
                 lmk.begin(LM, PC, lout, lloads, past[npast - 1], trial, have_trial, h)
                 lmk.substep_tangent(LM, past[npast - 1], xs)
                 m = substeps(h, xs, mobility, sub_limit, max_sub)
@@ -395,7 +410,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             # stages are computed and not used, the state and the inputs are the same
             for i in range(acc.shape[0]):
                 acc[i] = 0.0
-            if lawm:
+            if LM is not None:
                 y_end, drift, finite = lmk.advance(y, t0, hs, m, t, LM, PC, lout, lloads, onsets, bounds, I, R, L,
                                                    LR, W, u, acc, p1, stages)
             else:
@@ -451,10 +466,10 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                 counts[5] += 1
                 break
             nj = np.int64(0)
-            if has_law and not lawm:   # law-model: no onset jumps, no prediction (its force_model is None)
+            if has_law and LM is None:   # law-model: no onset jumps, no prediction (its force_model is None)
                 cage_end = fset[5] + ((y_end[tj] - fset[6]) * PC[11] + (y_end[ti] - fset[7]) * PC[12])
                 nj = onset_jumps(PC, start, cage_start, end, cage_end, jumps)
-            if predict and not lawm and ((nj == 0) if passes == 1 else same_jumps(jumps, nj, trial_jumps, ntrial)) \
+            if predict and LM is None and ((nj == 0) if passes == 1 else same_jumps(jumps, nj, trial_jumps, ntrial)) \
                     and next_pass_negligible(fm, end, mobility, h, tol):
                 counts[6] += 1
                 break

@@ -155,14 +155,14 @@ _int_address = _address_of(types.int32, "integer/boolean values (fmi2Integer, fm
 
 # ---- the calls for njit code ---------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _missing(H, slot) -> bool:
     """The handle is too short, invalidated, or the FMU lacks the function of ``slot``. Callers pass the slot
     as ``np.int64``: a literal constant would compile one specialisation per slot (first run's compile)."""
     return H.size < SLOTS or H[COMPONENT] == 0 or H[slot] == 0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _fits(vr, size, contiguous) -> bool:
     """``vr`` fits values of ``size`` (C-contiguous if ``contiguous``); the values' size and flag, not the array:
     one specialisation for the float64 and the int32 values."""

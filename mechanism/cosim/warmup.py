@@ -1,13 +1,23 @@
-"""A first run's second process: compile the compiled loop's own functions into numba's disk cache while the
-run's process compiles the multibody kernels (issue 11: the first run's compile, on two cores).
+"""A first run's second process: compile what the run's process would compile after its own kernels into numba's
+disk cache, while the run's process compiles the kernels it calls from Python first (issue 11: the first run's
+compile, on two cores).
 
-``compiled_driver.start_warmup`` starts ``python -m mechanism.cosim.warmup`` when ``run_steps`` is not cached;
-the run waits for it before its first chunk, whose compile of ``run_steps`` then loads these functions from the
-cache instead of compiling them. Each is compiled for the argument types ``run_steps`` calls it with
-(``SIGNATURES``; tests/test_compile_time.py holds them against the run's): a different type would only mean a
-second specialisation compiled by the run, never a different number. Nothing is executed here.
+``compiled_driver.start_warmup`` starts ``python -m mechanism.cosim.warmup`` when ``run_steps`` is not cached. The
+run's process compiles ``prepare``, ``max_violation`` and ``finish`` (and their callees) for ``CouplingLoop.start``
+and the first sample, then the energy account's kernels; this process compiles, stage by stage (``STAGES``), the
+loop's own functions, ``kernels.advance`` (by then the callees it shares with ``finish`` are mostly in the cache)
+and the component's exchange, printing each stage's name when it is done (about as long on an idle machine). The
+run waits (``compiled_driver.finish_warmup``) only for the stages its step needs (``needed``: an FMU run's step has
+no in-process law, and only law-model's has law-model's functions), ends this process then, and its compile of
+``run_steps`` loads these functions from the cache instead of compiling them.
+
+Each function is compiled for the argument types its caller gives it (``run_steps``, or the run's Python calls
+for the energy account); tests/test_compile_time.py holds them against the run's: a different type would only mean
+a second specialisation compiled by the run, never a different number. Nothing is executed here.
 """
 from __future__ import annotations
+
+import sys
 
 from numba import types
 
@@ -15,16 +25,22 @@ from mechanism.cosim import compiled_loop as cl
 from mechanism.cosim import component_call as cc
 from mechanism.cosim import law_model_kernel as lmk
 from mechanism.cosim.energy_kernel import stage_integrals
-from mechanism.cosim.law_kernel import elastic_energy
+from mechanism.cosim.law_kernel import elastic_energy, evaluate
+from mechanism.multibody import kernels
 
-_F, _I, _B = types.float64, types.int64, types.boolean
+_F, _I, _B, _N = types.float64, types.int64, types.boolean, types.none
 _F1, _F2 = types.float64[::1], types.float64[:, ::1]
 _I1, _U1 = types.int64[::1], types.uint32[::1]
 
-#: (function, argument types) as ``run_steps`` calls them; their callees (the law, the life sums, the FMU's
-#: calls, the scheme's helpers) compile with them
-SIGNATURES = (
-    (cl._exchange, (_I, _F1, _F, _F1, _I1, _U1, _U1, _F, _F, _F1, _F1, _I, _F, _F1, _I1)),
+#: the energy account's kernels as the run's process calls them from Python (``EnergyAccount``), before its first chunk
+ENERGY = (
+    (evaluate, (_F1, _F, _F, _F, _F, _F, _F, _F, _F1, _F1)),
+    (elastic_energy, (_F1, _F, _F, _F)),
+    (stage_integrals, (_F1, _F2, _I, _F, _F)),
+)
+#: (function, argument types) as ``run_steps`` calls them, for every component and scheme; their callees (the life
+#: sums, the FMU's state calls, the scheme's helpers) compile with them
+LOOP = (
     (cl._release, (_I, _I1, _I, _I1)),
     (cc.save, (_I, _F1, _F1, _I1)),
     (cc.restore, (_I, _F1, _F1, _I1, _I)),
@@ -42,22 +58,44 @@ SIGNATURES = (
     (cl._fail, (_F1, _I, _I, _F, _F, _F, _F, _F, _F, _F)),
     (cl._copy, (_F1, _F1, _I)),
     (cl._copy_rows, (_F2, _F2, _I)),
-    # law-model's step (law_model_kernel; its RK4 compiles the multibody stage kernels with it)
+)
+#: the RK4 step (``kernels.advance``, with the energy account's arrays) as ``run_steps`` calls it
+ADVANCE = ((kernels.advance, (_F1, _F, _F, _I, _F, _F1, _F1, _B, _I1, _F1, _I1, _F1, _F1, _F1, _F1, _F1, _F2)),)
+#: the exchange with an FMU (``P`` None: ``fmu_native`` only) and with the in-process law
+_EXCHANGE = (_I, _F1, _F, _F1, _I1, _U1, _U1, _F, _F, _F1, _F1, _I, _F, _F1, _I1)
+FMU = ((cl._exchange, (_I, _N, *_EXCHANGE[2:])),)
+IN_PROCESS = ((cl._exchange, _EXCHANGE),)
+#: law-model's step (law_model_kernel; its RK4 compiles the multibody stage kernels with it)
+LAW_MODEL = (
     (lmk.set_cage, (_F1, _F1, _F, _F, _F)),
     (lmk.begin, (_F1, _F1, _F1, _F1, _F1, _F1, _B, _F)),
     (lmk.substep_tangent, (_F1, _F1, _F1)),
     (lmk.onset_corrections, (_F1, _F1, _I, _F2, _F1, _F2)),
     (lmk.advance, (_F1, _F, _F, _I, _F, _F1, _F1, _F1, _F1, _F2, _F2, _I1, _F1, _I1, _F1, _F1, _F1, _F1, _F1, _F2)),
 )
-#: called by the run's process itself before its first chunk (the energy account's set-up): not here
-RUN_COMPILES = ((stage_integrals, (_F1, _F2, _I, _F, _F)), (elastic_energy, (_F1, _F, _F, _F)))
+#: the stages in the order compiled: (name, functions). The energy account's kernels come last: the run's process
+#: compiles them itself after ``finish`` (about when this process is done with the step's stages), so a first run
+#: does not wait for them; they are here for a warm-up run by itself (``python -m mechanism.cosim.warmup``)
+STAGES = (("loop", LOOP), ("advance", ADVANCE), ("fmu", FMU), ("in-process", IN_PROCESS), ("law-model", LAW_MODEL),
+          ("energy", ENERGY))
+#: the functions every run's step calls (the rest: ``needed``)
+SIGNATURES = tuple(sig for _, stage in STAGES for sig in stage)
 
 
-def main() -> None:
-    """Compile (or load from the cache) every function of ``SIGNATURES``."""
-    for function, args in SIGNATURES:
-        function.compile(args)
+def needed(fmu: bool, law_model: bool) -> list[str]:
+    """The stages the step of a run needs: through an FMU or in-process, with law-model's or another scheme."""
+    return ["loop", "advance", "fmu" if fmu else "in-process"] + (["law-model"] if law_model else [])
+
+
+def main(names: list[str] | None = None) -> None:
+    """Compile (or load from the cache) the stages ``names`` (default: all) in ``STAGES``' order, printing each
+    stage's name when it is in the cache."""
+    for name, stage in STAGES:
+        if names is None or name in names:
+            for function, args in stage:
+                function.compile(args)
+            print(name, flush=True)
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:] or None)

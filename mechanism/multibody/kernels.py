@@ -366,7 +366,7 @@ def _in_model_order(I, W, offset, out):
         out[k] = W[offset + I[otm + k]]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def multipliers(I, W, lam_model):
     """Lambda of the last solve, in model order."""
     _in_model_order(I, W, _layout(I)[3], lam_model)
@@ -446,7 +446,7 @@ def _add_link_force(y, I, L, LR, W, ex, ey, fx, fy):
     _add_point_force(W, oQ, y, nb, jb, -fx, -fy, xj, yj)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def force_of_model(fm, tau, ex, ey, vx, vy):
     """F(tau, e, v) = F0 + a1 s + a2 s^2 + K (e - e0) + C (v - v0) (``ForceModel``)."""
     s = tau - fm[0]
@@ -456,7 +456,7 @@ def force_of_model(fm, tau, ex, ey, vx, vy):
 
 
 # ---------------------------------------------------------------------------------- the step
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _applied(I, R, W):
     """Q^A of gravity [N, N, N m] into Q in W."""
     n, K, A = I[1], I[3], I[4]
@@ -466,7 +466,7 @@ def _applied(I, R, W):
         W[oQ + i] = R[o + i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rhs(tau, y, fm, I, R, L, LR, W, u, dy):
     """dy/dt = [qd, qdd] with the force joint's force given by the force model fm: ``stage_inputs``, the force
     at those inputs, ``stage_derivative``."""
@@ -477,7 +477,7 @@ def rhs(tau, y, fm, I, R, L, LR, W, u, dy):
     stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def stage_inputs(y, I, R, L, LR, W, u):
     """The first half of ``rhs`` (and of ``mechanism.cosim.law_model_kernel``'s stages, whose force the caller
     gives): the rotations and Q^A of y into W and its bearing inputs into u (eq. 10-12)."""
@@ -487,7 +487,7 @@ def stage_inputs(y, I, R, L, LR, W, u):
         _link_inputs(y, I, L, LR, W, u)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy):
     """The second half of ``rhs`` after ``stage_inputs``: dy/dt = [qd, qdd] with the force joint's force (fx, fy)
     at the inputs u (eq. 20-23)."""
@@ -500,7 +500,7 @@ def stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy):
     _solve(y, I, R, W, dy)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def powers(y, I, R, W):
     """The powers [W] at the state y whose right-hand side was just evaluated (kinematics, lambda and Q in W):
     of the drivers lambda . Phi_t (the rheonomic constraints' work, e.g. the crank's M omega), of the applied
@@ -521,7 +521,7 @@ def powers(y, I, R, W):
     return drive, app, total - app
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _stage_row(stages, row, y, u, nb, L):
     """The energy account's record of a stage state: its bearing inputs u and the ring angles (journal, housing)."""
     for i in range(6):
@@ -645,7 +645,7 @@ def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t,
         fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, kinetic_energy(y, I, R), n)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, ke, n):
     """Write the probes of a sample: row[probes[k, 0]] = scale[k] * source[probes[k, 2]] with source
     probes[k, 1]: 0 q, 1 qd, 2 qdd, 3 lambda (model order), 4 bearing inputs of y, 5 force (index 0 x,
@@ -673,7 +673,7 @@ def fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, ke, n):
         row[c] = scale[k] * v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def kinetic_energy(y, I, R):
     """T = qd^T M qd / 2 [J] of the state y = [q, qd]."""
     n, K, A = I[1], I[3], I[4]
