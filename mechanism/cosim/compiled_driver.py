@@ -164,6 +164,7 @@ class CompiledLoop:
         self.law_model = bool(getattr(scheme, "uses_law", False) and getattr(scheme, "law", None) is not None)
         if self.law_model:
             fset[14] = scheme.resolution
+            fset[15] = scheme.min_substeps
         self.fset = fset
         iset = np.zeros(cl.N_ISET, np.int64)
         iset[0:10] = (settings.max_substeps, max(2, settings.max_iterations), settings.iterate_where_needed,
