@@ -8,11 +8,13 @@ compiled loop's law-model runs against it) with the same arithmetic and order:
 
 F_law: eq. (18)-(19) (``law_kernel.evaluate``); omega_m: eq. (16) of the ring speeds at t_n; c_n, c*: the
 component's force at both ends against the law (``begin``); g_k: the onset correction of substep k
-(``onset_corrections``); the substeps from the stiffest law tangent met in the step (``substep_tangent``).
+(``onset_corrections``); the substeps from the stiffest law tangent met in the step (``substep_tangent``),
+at least ``min_substeps`` in contact (``at_least``).
 
-The scheme's state is one float64 array ``LM`` (layout ``LM_FIELDS``), the onset corrections an (m x 3) array
-(g_x, g_y, present) and the substep-start states of the pass an ((m + 1) x 4) array ``bounds`` (e_x, e_y, v_x,
-v_y): the next pass's onset corrections are built from them.
+The scheme's state is one float64 array ``LM`` (layout ``LM_FIELDS``), the onset corrections an (m x 5) array
+(g0_x, g0_y, g1_x, g1_y, present: g0 + g1 sigma over the substep) and the substep-start states of the pass an
+((m + 1) x 4) array ``bounds`` (e_x, e_y, v_x, v_y): the next pass's onset corrections are built from them, and the
+first pass's acceptance (``any_onset``, ``end_mismatch``) looks at them.
 """
 from __future__ import annotations
 

@@ -21,11 +21,14 @@ coupling error is the master's RK4 error with its substeps; a law that differs f
 corrected at both ends, to first order in between (the linear correction ramp).
 
 The step is iterated with rollback like ``jacobian-implicit`` (``iterative``): pass 0 holds c_n, later passes
-ramp to the last pass's c*; ``converged`` compares two passes' end-of-step force and eccentricity. The ring
-speeds sent to the component are the secant ones (implicit.py). The master's RK4 substeps are sized by the
-stiffest law tangent met in the step, ``resolution`` times finer than stability needs (``substep_tangent``),
-and from the second pass each contact onset gets a constant correction over its substep that makes RK4's
-impulse of the damping jump exact (``_onset_corrections``). docs/coupling.md, "Model-based coupling".
+ramp to the last pass's c*; ``converged`` compares two passes' end-of-step force and eccentricity, and the first
+pass is accepted at once when the master predicts that a second would change nothing (``end_mismatch``: c* - c_n,
+no contact onset in the step). The ring speeds sent to the component are the secant ones (implicit.py). The
+master's RK4 substeps are sized by the stiffest law tangent met in the step, ``resolution`` times finer than
+stability needs (``substep_tangent``), at least ``min_substeps`` per step in contact (the error is the substeps':
+they must shrink with the step for the scheme to converge with h), and from the second pass each contact onset gets
+a force linear over its substep that makes RK4's impulse and first moment of the force's switch-on exact
+(``_onset_corrections``, ``onset_weights``). docs/coupling.md, "Model-based coupling" and "law-model's order".
 
 Needs the law (``bind_law``, from the master's ``contact_law``) and, each step, the cage angle and ring
 speeds at t_n (``set_cage``) and the substeps (``set_substeps``); without a law it is ``jacobian-implicit``.
