@@ -10,14 +10,29 @@ The reference takes tens of seconds to minutes per point: its rev-2 figures are 
 (JSON per point; delete it to recompute).
 
     python benchmarks/coarse_step.py [--step 1e-4] [--schemes jacobian-implicit,law-model] [--points 600/8,300/8]
+
+``--order`` measures the observed order instead (issue 12 item 5; docs/coupling.md, "law-model's order"): each
+scheme at the steps ``--steps`` (2e-5 ... 2.5e-6 s) over two revolutions at the first point (1200 rpm, 8 balls),
+against the monolithic reference at rtol 1e-12 sampled every 1e-5 s: the largest cage-angle error [rad] and the rev-2
+peak |F| error (relative, on the run's own sample grid), their pairwise and least-squares orders. The law-model's
+knobs for the measurements: ``--substeps M`` (exactly M RK4 substeps per pass in contact), ``--min-substeps``,
+``--resolution``, ``--no-onset-correction``, ``--revs`` (0.2: the start-up window, its second half's peak).
+
+    python benchmarks/coarse_step.py --order [--schemes law-model] [--substeps 8] [--no-onset-correction]
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
 
+import numpy as np
+
+from mechanism import run as run_module
+from mechanism.cosim.coupling.law_model import LawModel
+from mechanism.cosim.master import MasterSettings
 from mechanism.output.results import summary
 from mechanism.run import RunConfig, run
 from mechanism.studies.reproduce.cases import balls_fit
@@ -71,6 +86,60 @@ def worst(got: dict, ref: dict, skip: tuple = ()) -> tuple[float, str]:
     return errors[key], key
 
 
+def _fit(steps: list[float], errors: list[float]) -> float:
+    """Least-squares slope of log(error) against log(step)."""
+    return float(np.polyfit(np.log(steps), np.log(np.maximum(errors, 1e-300)), 1)[0])
+
+
+def order(args, rpm: float, balls: int) -> None:
+    """The observed order of each scheme (``--order``): cage angle and rev-2 (or second-half) peak |F|."""
+    steps = [float(v) for v in args.steps.split(",")]
+    ref = run(RunConfig(mode="monolithic", rpm=rpm, revs=args.revs, rtol=1e-12, settings=settings(balls),
+                        progress=False))
+    t_ref = np.asarray(ref["time"])
+    F_ref, cage_ref = np.hypot(ref["F_x"], ref["F_y"]), np.asarray(ref["cage_angle"])
+    window = t_ref >= (60.0 / rpm * (args.revs - 1) - 1e-12 if args.revs > 1 else 0.5 * t_ref[-1])
+    if args.substeps:          # exactly M substeps per pass in contact: the stability rule out of the way
+        LawModel.resolution, LawModel.min_substeps = 1e9, args.substeps
+    if args.min_substeps is not None:
+        LawModel.min_substeps = args.min_substeps
+    if args.resolution is not None:
+        LawModel.resolution = args.resolution
+    LawModel.onset_correction = not args.no_onset_correction
+    cap = args.substeps or MasterSettings.max_substeps
+    print(f"{rpm:g} rpm, {balls} balls, {args.revs:g} revolutions; law-model: resolution {LawModel.resolution:g}, "
+          f"min_substeps {LawModel.min_substeps}, onset correction {LawModel.onset_correction}")
+    for scheme in [s for s in args.schemes.split(",") if s]:
+        cage, peak = [], []
+        for h in steps:
+            run_module.MasterSettings = lambda *a, **k: dataclasses.replace(MasterSettings(*a, **k), max_substeps=cap)
+            try:
+                start = time.perf_counter()
+                r = run(RunConfig(mode="inprocess", rpm=rpm, revs=args.revs, step=h, scheme=scheme,
+                                  output_interval=max(h, 1e-5), settings=settings(balls), progress=False))
+                wall = time.perf_counter() - start
+            finally:
+                run_module.MasterSettings = MasterSettings
+            if not r.ok:
+                print(f"    {scheme:20s} h = {h:8.2e} s: {r.status} {r.message}")
+                break
+            idx = np.rint(np.asarray(r["time"]) / 1e-5).astype(int)
+            cage.append(float(np.max(np.abs(np.asarray(r["cage_angle"]) - cage_ref[idx]))))
+            sel = window[idx]
+            F = np.hypot(r["F_x"], r["F_y"])
+            peak.append(abs(float(np.max(F[sel])) / float(np.max(F_ref[idx][sel])) - 1.0))
+            n = round(args.revs * 60.0 / rpm / h)
+            print(f"    {scheme:20s} h = {h:8.2e} s: cage {cage[-1]:.3e} rad, peak |F| {peak[-1]:.3e}, "
+                  f"{r.meta.get('iteration_passes_mean') or 1:.3f} passes/step, "
+                  f"{r.meta['substeps_total'] / n:.2f} substeps/step ({wall:.1f} s)", flush=True)
+        else:
+            pair_c = [np.log(cage[k] / cage[k + 1]) / np.log(steps[k] / steps[k + 1]) for k in range(len(steps) - 1)]
+            pair_p = [np.log(peak[k] / peak[k + 1]) / np.log(steps[k] / steps[k + 1]) for k in range(len(steps) - 1)]
+            print(f"    {scheme:20s} order: cage {_fit(steps, cage):.2f} (pairwise "
+                  f"{', '.join(f'{v:.2f}' for v in pair_c)}), peak |F| {_fit(steps, peak):.2f} (pairwise "
+                  f"{', '.join(f'{v:.2f}' for v in pair_p)})", flush=True)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--step", type=float, default=1e-4)
@@ -81,8 +150,19 @@ def main() -> None:
     p.add_argument("--points", default=",".join(f"{r}/{b}" for r, b in POINTS), help="rpm/balls,...")
     p.add_argument("--cache", default="/tmp/coarse_step_reference")
     p.add_argument("--reference-only", action="store_true", help="compute (cache) the references and stop")
+    p.add_argument("--order", action="store_true", help="the observed order at --steps (first point, two "
+                   "revolutions) against the monolithic reference at rtol 1e-12 instead")
+    p.add_argument("--steps", default="2e-5,1e-5,5e-6,2.5e-6")
+    p.add_argument("--revs", type=float, default=2.0)
+    p.add_argument("--substeps", type=int, default=0, help="law-model: exactly this many substeps per pass in contact")
+    p.add_argument("--min-substeps", type=int, default=None)
+    p.add_argument("--resolution", type=float, default=None)
+    p.add_argument("--no-onset-correction", action="store_true")
     args = p.parse_args()
     points = [tuple(float(v) if k == 0 else int(v) for k, v in enumerate(s.split("/"))) for s in args.points.split(",")]
+    if args.order:
+        order(args, *points[0])
+        return
     schemes = [s for s in args.schemes.split(",") if s]
     output = 1e-5 if args.full else args.step
     if args.full:

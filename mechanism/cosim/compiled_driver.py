@@ -211,6 +211,7 @@ class CompiledLoop:
         self.law_model = bool(getattr(scheme, "uses_law", False) and getattr(scheme, "law", None) is not None)
         if self.law_model:
             fset[14] = scheme.resolution
+            fset[15] = scheme.min_substeps
         # law-model's state (zeroed by each chunk), or None: the step compiled without law-model's
         self.LM = np.zeros(lmk.LM_SIZE) if self.law_model else None
         global _variant

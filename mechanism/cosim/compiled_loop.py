@@ -54,8 +54,8 @@ DO_STEP, GET_STATE, SET_STATE, FREE_STATE, SAMPLE = 0, 1, 2, 3, 4
 N_COUNTS = 11
 #: float settings (``fset``): mobility, substep limit, max constraint violation, iteration tol, cv (in/out),
 #: contact law: cage start, journal and housing angle at t = 0; energy: start energy, stage cage offset,
-#: cage start, journal and housing angle at t = 0; eccentricity limit; law-model: ``resolution``
-N_FSET = 15
+#: cage start, journal and housing angle at t = 0; eccentricity limit; law-model: ``resolution``, ``min_substeps``
+N_FSET = 16
 #: int settings (``iset``): max substeps, pass limit, predict, iterative, secant, energy, theta_j, theta_i,
 #: contact law present, constraints (m), end evaluation valid (in/out), component kind (``component_call``),
 #: drift history, entries of past (in/out), force model (``MODELS``), Jacobi ordering, the scheme's history,
@@ -225,7 +225,13 @@ def next_pass_negligible(fm, b, mobility, h, tol):
     if mobility <= 0.0:
         return False
     fx, fy = force_of_model(fm, b[0], b[1], b[2], b[3], b[4])
-    d = math.hypot(b[5] - fx, b[6] - fy) * mobility
+    return mismatch_negligible(b[5] - fx, b[6] - fy, b, mobility, h, tol)
+
+
+@njit(cache=True)
+def mismatch_negligible(dx, dy, b, mobility, h, tol):
+    """``CouplingLoop._next_pass_negligible`` from the end mismatch (dx, dy) [N] of this pass's force model."""
+    d = math.hypot(dx, dy) * mobility
     de, dv = d * h * h / 6.0, d * h / 2.0
     k = max(sym_eig_max(b[7], b[8], b[9]), 0.0)
     c = max(sym_eig_max(b[10], b[11], b[12]), 0.0)
@@ -328,9 +334,10 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
         for i in range(LM.shape[0]):
             LM[i] = 0.0
         LM[18] = fset[14]
+        LM[19] = fset[15]
     lout = np.zeros(10)
     lloads = np.zeros(max(nb_c, 1))
-    onsets = np.zeros((max(max_sub, 1), 3))
+    onsets = np.zeros((max(max_sub, 1), 5))
     bounds = np.zeros((max(max_sub, 1) + 1, 4))
     xs = np.zeros(13)
     trial_jumps = np.zeros((max(nb_c, 1), 3))
@@ -388,12 +395,12 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             if LM is not None:   # LawModel.begin_step, substep_tangent, set_substeps
                 lmk.begin(LM, PC, lout, lloads, past[npast - 1], trial, have_trial, h)
                 lmk.substep_tangent(LM, past[npast - 1], xs)
-                m = substeps(h, xs, mobility, sub_limit, max_sub)
+                m = lmk.at_least(LM, substeps(h, xs, mobility, sub_limit, max_sub), max_sub)
                 if onset_corr and have_trial and int(LM[17]) == m:
                     lmk.onset_corrections(LM, PC, m, bounds, trial, onsets)
                 else:
                     for k in range(m):
-                        onsets[k, 2] = 0.0
+                        onsets[k, 4] = 0.0
                 LM[17] = m
             else:
                 if model != 0:
@@ -466,13 +473,20 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                 counts[5] += 1
                 break
             nj = np.int64(0)
-            if has_law and LM is None:   # law-model: no onset jumps, no prediction (its force_model is None)
+            if has_law:   # the onset jumps (law-model: its first pass is accepted only without one)
                 cage_end = fset[5] + ((y_end[tj] - fset[6]) * PC[11] + (y_end[ti] - fset[7]) * PC[12])
                 nj = onset_jumps(PC, start, cage_start, end, cage_end, jumps)
-            if predict and LM is None and ((nj == 0) if passes == 1 else same_jumps(jumps, nj, trial_jumps, ntrial)) \
-                    and next_pass_negligible(fm, end, mobility, h, tol):
-                counts[6] += 1
-                break
+            if predict and ((nj == 0) if passes == 1 else same_jumps(jumps, nj, trial_jumps, ntrial)):
+                if LM is not None:   # LawModel.end_mismatch: the first pass only, no onset to correct in its substeps
+                    accept = passes == 1 and mobility > 0.0 and not lmk.any_onset(LM, PC, m, bounds, end, onsets)
+                    if accept:
+                        mx, my = lmk.end_mismatch(LM, PC, lout, lloads, end)
+                        accept = mismatch_negligible(mx, my, end, mobility, h, tol)
+                else:
+                    accept = next_pass_negligible(fm, end, mobility, h, tol)
+                if accept:
+                    counts[6] += 1
+                    break
             _copy(prev, end, end.shape[0])
             have_prev = True
             _copy(trial, end, end.shape[0])

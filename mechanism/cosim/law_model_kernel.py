@@ -8,11 +8,13 @@ compiled loop's law-model runs against it) with the same arithmetic and order:
 
 F_law: eq. (18)-(19) (``law_kernel.evaluate``); omega_m: eq. (16) of the ring speeds at t_n; c_n, c*: the
 component's force at both ends against the law (``begin``); g_k: the onset correction of substep k
-(``onset_corrections``); the substeps from the stiffest law tangent met in the step (``substep_tangent``).
+(``onset_corrections``); the substeps from the stiffest law tangent met in the step (``substep_tangent``),
+at least ``min_substeps`` in contact (``at_least``).
 
-The scheme's state is one float64 array ``LM`` (layout ``LM_FIELDS``), the onset corrections an (m x 3) array
-(g_x, g_y, present) and the substep-start states of the pass an ((m + 1) x 4) array ``bounds`` (e_x, e_y, v_x,
-v_y): the next pass's onset corrections are built from them.
+The scheme's state is one float64 array ``LM`` (layout ``LM_FIELDS``), the onset corrections an (m x 5) array
+(g0_x, g0_y, g1_x, g1_y, present: g0 + g1 sigma over the substep) and the substep-start states of the pass an
+((m + 1) x 4) array ``bounds`` (e_x, e_y, v_x, v_y): the next pass's onset corrections are built from them, and the
+first pass's acceptance (``any_onset``, ``end_mismatch``) looks at them.
 """
 from __future__ import annotations
 
@@ -35,9 +37,9 @@ from mechanism.multibody.kernels import (
 )
 
 #: ``LM``: t_n, h, phi_n, omega_m, omega_inner and omega_outer at t_n, c_n (2), c* (2), the stiffest tangent's
-#: largest eigenvalue and its K, C (6), the substeps of the last pass, ``resolution``
+#: largest eigenvalue and its K, C (6), the substeps of the last pass, ``resolution``, ``min_substeps``
 LM_FIELDS = ("t", "h", "cage", "omega", "wi", "wo", "c0_x", "c0_y", "c1_x", "c1_y", "k_seen",
-             "k_xx", "k_xy", "k_yy", "c_xx", "c_xy", "c_yy", "m", "resolution")
+             "k_xx", "k_xy", "k_yy", "c_xx", "c_xy", "c_yy", "m", "resolution", "min_substeps")
 LM_SIZE = len(LM_FIELDS)
 
 
@@ -102,16 +104,76 @@ def substep_tangent(LM, a, xs):
 
 
 @njit(cache=True)
-def onset_corrections(LM, P, m, bounds, end, onsets):
-    """``LawModel._onset_corrections`` into onsets[:m] (g_x, g_y, present): per substep the constant force that
-    gives RK4 each contact onset's exact damping impulse (eq. 18), from the last pass's substep starts
-    ``bounds`` and its end exchange ``end``."""
+def at_least(LM, m, cap):
+    """``LawModel.set_substeps``' count: m, at least ``min_substeps`` (at most cap) once the law met a contact."""
+    if LM[10] > 0.0 and m < LM[19]:
+        m = max(m, min(int(LM[19]), cap))
+    return m
+
+
+@njit(cache=True)
+def end_mismatch(LM, P, out, loads, b):
+    """``LawModel.end_mismatch`` on the first pass: the end exchange b's force against the law there plus c_n."""
+    evaluate(P, b[1], b[2], b[3], b[4], LM[2] + LM[3] * (b[0] - LM[0]), LM[4], LM[5], out, loads)
+    return b[5] - (out[0] + LM[6]), b[6] - (out[1] + LM[7])
+
+
+@njit(cache=True)
+def any_onset(LM, P, m, bounds, end, onsets):
+    """``LawModel.end_mismatch``'s condition: a contact onset to correct in this pass's substeps (``onsets`` is
+    overwritten: the next pass builds its own)."""
+    onset_corrections(LM, P, m, bounds, end, onsets)
     for k in range(m):
-        onsets[k, 0] = onsets[k, 1] = onsets[k, 2] = 0.0
+        if onsets[k, 4] != 0.0:
+            return True
+    return False
+
+
+@njit(cache=True)
+def onset_fraction(da, db, ma, mb):
+    """``law_model.onset_fraction``: the root theta in (0, 1] of the cubic Hermite interpolant of a ball's deflection
+    through (da, ma) at the substep's start and (db, mb) at its end (slopes per substep), da <= 0 < db."""
+    theta = da / (da - db)
+    for _ in range(4):
+        t2 = theta * theta
+        t3 = t2 * theta
+        p = (2.0 * t3 - 3.0 * t2 + 1.0) * da + (t3 - 2.0 * t2 + theta) * ma + (3.0 * t2 - 2.0 * t3) * db \
+            + (t3 - t2) * mb
+        dp = (6.0 * t2 - 6.0 * theta) * (da - db) + (3.0 * t2 - 4.0 * theta + 1.0) * ma + (3.0 * t2 - 2.0 * theta) * mb
+        if not dp > 0.0:
+            break
+        nxt = theta - p / dp
+        if not 0.0 < nxt <= 1.0:
+            break
+        theta = nxt
+    return theta
+
+
+@njit(cache=True)
+def onset_weights(theta, j, d):
+    """``law_model.onset_weights``: (g0, g1) [N] of the correction g0 + g1 sigma over a substep (sigma = 0, 1/2,
+    1/2, 1 at RK4's stages) for a ball force switched on at theta with the value j and the slope d per substep."""
+    half = 1.0 if theta < 0.5 else 0.0
+    r = 1.0 - theta
+    fm = half * (j + d * (0.5 - theta))
+    f1 = j + d * r
+    a = j * r + d * r * r / 2.0 - (4.0 * fm + f1) / 6.0
+    b = j * r * r / 2.0 + d * r * r * r / 6.0 - fm / 3.0
+    return 6.0 * b - 2.0 * a, 6.0 * a - 12.0 * b
+
+
+@njit(cache=True)
+def onset_corrections(LM, P, m, bounds, end, onsets):
+    """``LawModel._onset_corrections`` into onsets[:m] (g0_x, g0_y, g1_x, g1_y, present): per substep the force
+    g0 + g1 sigma that gives RK4 each contact onset's exact impulse and first moment (eq. 18), from the last
+    pass's substep starts ``bounds`` and its end exchange ``end``."""
+    for k in range(m):
+        for i in range(5):
+            onsets[k, i] = 0.0
     if int(P[3]) != DAMPING_CONSTANT or P[4] == 0.0:
         return
     nb = int(P[0])
-    C, half, hs = P[4], P[2], LM[1] / m
+    C, half, hs, om = P[4], P[2], LM[1] / m, LM[3]
     spacing = 2.0 * math.pi / nb
     for k in range(m):
         if k + 1 < m:
@@ -119,23 +181,29 @@ def onset_corrections(LM, P, m, bounds, end, onsets):
         else:
             bx, by, bvx, bvy = end[1], end[2], end[3], end[4]
         ax, ay, avx, avy = bounds[k, 0], bounds[k, 1], bounds[k, 2], bounds[k, 3]
-        pa, pb = LM[2] + LM[3] * k * hs, LM[2] + LM[3] * (k + 1) * hs
-        gx = gy = 0.0
+        pa, pb = LM[2] + om * k * hs, LM[2] + om * (k + 1) * hs
+        g0x = g0y = g1x = g1y = 0.0
         for r in range(nb):
             ca, sa = math.cos(pa + r * spacing), math.sin(pa + r * spacing)
             cb, sb = math.cos(pb + r * spacing), math.sin(pb + r * spacing)
             da, db = ax * ca + ay * sa - half, bx * cb + by * sb - half
             if not (da <= 0.0 and 0.0 < db):
                 continue
-            theta = da / (da - db)
+            ma = (avx * ca + avy * sa + om * (ay * ca - ax * sa)) * hs
+            mb = (bvx * cb + bvy * sb + om * (by * cb - bx * sb)) * hs
+            theta = onset_fraction(da, db, ma, mb)
             phi = pa + r * spacing + theta * (pb - pa)
             ux, uy = math.cos(phi), math.sin(phi)
-            vr = (avx + theta * (bvx - avx)) * ux + (avy + theta * (bvy - avy)) * uy
-            w = (1.0 - theta) - (1.0 / 6.0 + (2.0 / 3.0 if theta < 0.5 else 0.0))
-            g = C * max(vr, 0.0) * w
-            gx, gy = gx + g * ux, gy + g * uy
-        if gx != 0.0 or gy != 0.0:
-            onsets[k, 0], onsets[k, 1], onsets[k, 2] = gx, gy, 1.0
+            wa = (avx * ux + avy * uy) * C
+            wb = (bvx * ux + bvy * uy) * C
+            j = wa + theta * (wb - wa)
+            if not j > 0.0:
+                continue
+            g0, g1 = onset_weights(theta, j, wb - wa)
+            g0x, g0y = g0x + g0 * ux, g0y + g0 * uy
+            g1x, g1y = g1x + g1 * ux, g1y + g1 * uy
+        if g0x != 0.0 or g0y != 0.0 or g1x != 0.0 or g1y != 0.0:
+            onsets[k, 0], onsets[k, 1], onsets[k, 2], onsets[k, 3], onsets[k, 4] = g0x, g0y, g1x, g1y, 1.0
 
 
 @njit(cache=True)
@@ -146,8 +214,9 @@ def force(LM, P, out, loads, onsets, bounds, tau, e_x, e_y, v_x, v_y, sub, stage
     fx, fy = law(LM, P, out, loads, s, e_x, e_y, v_x, v_y)
     if stage == 0:
         bounds[sub, 0], bounds[sub, 1], bounds[sub, 2], bounds[sub, 3] = e_x, e_y, v_x, v_y
-    if onsets[sub, 2] != 0.0:
-        fx, fy = fx + onsets[sub, 0], fy + onsets[sub, 1]
+    if onsets[sub, 4] != 0.0:
+        sigma = 0.0 if stage == 0 else (1.0 if stage == 3 else 0.5)
+        fx, fy = fx + (onsets[sub, 0] + onsets[sub, 2] * sigma), fy + (onsets[sub, 1] + onsets[sub, 3] * sigma)
     r = s / LM[1]
     return fx + LM[6] + r * (LM[8] - LM[6]), fy + LM[7] + r * (LM[9] - LM[7])
 

@@ -309,7 +309,7 @@ class CouplingLoop:
             m = substeps(h, scheme.substep_tangent(), self.mobility, settings.substep_limit,
                          settings.max_substeps) if scheme.uses_tangent else 1
             if scheme.uses_law:
-                scheme.set_substeps(m)
+                m = scheme.set_substeps(m, settings.max_substeps)
             if self.kernels:
                 model = scheme.force_model(t0, h)
                 fm = model.coefficients if model is not None else None
@@ -490,10 +490,17 @@ class CouplingLoop:
         distance to the fixed point is about that change (the pass-to-pass map contracts by g (k h^2/6 + c h/2),
         about 0.01 at 1200 rpm and h = 1e-5 s)."""
         model = scheme.force_model(t0, h)
-        if model is None or self.mobility <= 0.0:
+        if self.mobility <= 0.0:
             return False
-        fx, fy = model(b.t, b.e_x, b.e_y, b.v_x, b.v_y)
-        d = math.hypot(b.F_x - fx, b.F_y - fy) * self.mobility
+        if model is not None:
+            fx, fy = model(b.t, b.e_x, b.e_y, b.v_x, b.v_y)
+            dx, dy = b.F_x - fx, b.F_y - fy
+        else:         # a model-based scheme (law-model): its own end mismatch, on its first pass only
+            mismatch = scheme.end_mismatch(b) if hasattr(scheme, "end_mismatch") else None
+            if mismatch is None:
+                return False
+            dx, dy = mismatch
+        d = math.hypot(dx, dy) * self.mobility
         de, dv = d * h * h / 6.0, d * h / 2.0
         k = max(_sym_eig_max(b.k_xx, b.k_xy, b.k_yy), 0.0)
         c = max(_sym_eig_max(b.c_xx, b.c_xy, b.c_yy), 0.0)

@@ -55,6 +55,7 @@ LOOP = (
     (cl.onset_jumps, (_F1, _F1, _F, _F1, _F, _F2)),
     (cl.same_jumps, (_F2, _I, _F2, _I, types.Omitted(1e-3))),
     (cl.next_pass_negligible, (_F1, _F1, _F, _F, _F)),
+    (cl.mismatch_negligible, (_F, _F, _F1, _F, _F, _F)),
     (cl._fail, (_F1, _I, _I, _F, _F, _F, _F, _F, _F, _F)),
     (cl._copy, (_F1, _F1, _I)),
     (cl._copy_rows, (_F2, _F2, _I)),
@@ -70,7 +71,12 @@ LAW_MODEL = (
     (lmk.set_cage, (_F1, _F1, _F, _F, _F)),
     (lmk.begin, (_F1, _F1, _F1, _F1, _F1, _F1, _B, _F)),
     (lmk.substep_tangent, (_F1, _F1, _F1)),
+    (lmk.onset_fraction, (_F, _F, _F, _F)),
+    (lmk.onset_weights, (_F, _F, _F)),
     (lmk.onset_corrections, (_F1, _F1, _I, _F2, _F1, _F2)),
+    (lmk.at_least, (_F1, _I, _I)),
+    (lmk.end_mismatch, (_F1, _F1, _F1, _F1, _F1)),
+    (lmk.any_onset, (_F1, _F1, _I, _F2, _F1, _F2)),
     (lmk.advance, (_F1, _F, _F, _I, _F, _F1, _F1, _F1, _F1, _F2, _F2, _I1, _F1, _I1, _F1, _F1, _F1, _F1, _F1, _F2)),
 )
 #: the stages in the order compiled: (name, functions). The energy account's kernels come last: the run's process

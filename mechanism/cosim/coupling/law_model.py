@@ -21,11 +21,14 @@ coupling error is the master's RK4 error with its substeps; a law that differs f
 corrected at both ends, to first order in between (the linear correction ramp).
 
 The step is iterated with rollback like ``jacobian-implicit`` (``iterative``): pass 0 holds c_n, later passes
-ramp to the last pass's c*; ``converged`` compares two passes' end-of-step force and eccentricity. The ring
-speeds sent to the component are the secant ones (implicit.py). The master's RK4 substeps are sized by the
-stiffest law tangent met in the step, ``resolution`` times finer than stability needs (``substep_tangent``),
-and from the second pass each contact onset gets a constant correction over its substep that makes RK4's
-impulse of the damping jump exact (``_onset_corrections``). docs/coupling.md, "Model-based coupling".
+ramp to the last pass's c*; ``converged`` compares two passes' end-of-step force and eccentricity, and the first
+pass is accepted at once when the master predicts that a second would change nothing (``end_mismatch``: c* - c_n,
+no contact onset in the step). The ring speeds sent to the component are the secant ones (implicit.py). The
+master's RK4 substeps are sized by the stiffest law tangent met in the step, ``resolution`` times finer than
+stability needs (``substep_tangent``), at least ``min_substeps`` per step in contact (the error is the substeps':
+they must shrink with the step for the scheme to converge with h), and from the second pass each contact onset gets
+a force linear over its substep that makes RK4's impulse and first moment of the force's switch-on exact
+(``_onset_corrections``, ``onset_weights``). docs/coupling.md, "Model-based coupling" and "law-model's order".
 
 Needs the law (``bind_law``, from the master's ``contact_law``) and, each step, the cage angle and ring
 speeds at t_n (``set_cage``) and the substeps (``set_substeps``); without a law it is ``jacobian-implicit``.
@@ -50,6 +53,10 @@ class LawModel(InterfaceJacobianImplicit):
     resolution = 8.0
     #: False: no onset correction (``_onset_corrections``; for measurements)
     onset_correction = True
+    #: substeps per communication step at least while the law has a contact in the step (``set_substeps``): the
+    #: substep then shrinks with the step and the scheme converges with h (its error is the substeps', about third
+    #: order in their width; docs/coupling.md, "law-model's order")
+    min_substeps = 4
 
     def __init__(self):
         super().__init__()
@@ -59,6 +66,7 @@ class LawModel(InterfaceJacobianImplicit):
         self._omega = 0.0            # omega_m [rad/s] (eq. 16 at t_n)
         self._wi = self._wo = 0.0    # ring speeds at t_n [rad/s] (the oil-film law's entrainment speed)
         self._h_step = 1.0
+        self._t_n = 0.0
         self._m = 1                  # the master's RK4 substeps in this pass (``set_substeps``)
         self._calls = 0              # force evaluations in this pass: four per RK4 substep, in order
         self._bounds: dict[int, tuple[float, float, float, float]] = {}   # (e, v) at substep starts, this pass
@@ -122,33 +130,41 @@ class LawModel(InterfaceJacobianImplicit):
             dt = x.t - a.t
             fx, fy = self._law(dt, x.e_x, x.e_y, x.v_x, x.v_y)
             self._c1 = (x.F_x - fx, x.F_y - fy)
-        self._h_step = h
+        self._h_step, self._t_n = h, a.t
         if self.trial is None:
             self._recorded = None
         elif self._bounds:
             self._recorded = (self._m, self._bounds)
         self._bounds, self._onsets, self._calls = {}, {}, 0
 
-    def set_substeps(self, m: int) -> None:
-        """The master's RK4 substeps in the coming pass. From the second pass on, each ball's contact onset in a
-        substep of the last pass (same substeps) gets the onset correction of that substep (``_onset_corrections``)."""
+    def set_substeps(self, m: int, cap: int) -> int:
+        """The master's RK4 substeps in the coming pass: ``m`` (its stability rule on ``substep_tangent``), at least
+        ``min_substeps`` (at most ``cap``) while the law met a contact in the step; returns the count to use. From
+        the second pass on, each ball's contact onset in a substep of the last pass (same substeps) gets the onset
+        correction of that substep (``_onset_corrections``)."""
+        if self._k_seen > 0.0 and m < self.min_substeps:
+            m = max(m, min(self.min_substeps, cap))
         self._m = m
         if self.onset_correction and self._recorded is not None and self._recorded[0] == m and self.trial is not None:
             self._onsets = self._onset_corrections(m, self._recorded[1], self.trial)
+        return m
 
-    def _onset_corrections(self, m: int, bounds: dict, end: Exchanged) -> dict[int, tuple[float, float]]:
-        """Per substep, the constant force that makes RK4's impulse of each damping jump exact.
+    def _onset_corrections(self, m: int, bounds: dict, end: Exchanged) -> dict[int, tuple[float, float, float, float]]:
+        """Per substep, the force g0 + g1 sigma (sigma = (tau - t_k) / h_s) that makes RK4's impulse and first moment
+        of each contact onset exact.
 
-        A ball entering the load zone at t_k + theta h_s switches its damping force J = C max(v_r, 0) u_r on at
-        once (eq. 18, as ``implicit.onset_jumps``). RK4 samples it at its stages s = 0, h_s/2 (twice), h_s with
-        weights 1/6, 1/3, 1/3, 1/6: the impulse J h_s (1/6 + 2/3 [theta < 1/2]) instead of J h_s (1 - theta), an
-        O(h_s) error per onset (first order). A constant g over the substep is integrated exactly; g = J [(1 -
-        theta) - 1/6 - 2/3 [theta < 1/2]] gives the exact impulse. theta from the linear interpolation of
-        delta_r = e . u_r - P_d/2 between the substep's ends (of the last pass; the end of the step is ``end``)."""
+        A ball entering the load zone at t_k + theta h_s switches its force on at the value j = C v_r (eq. 18, the
+        Hertz term starts at zero), growing at d per substep (C dv_r, linear between the substep's ends). RK4 samples
+        it at its stages sigma = 0, 1/2 (twice), 1: 0, [theta < 1/2] (j + d (1/2 - theta)), j + d (1 - theta), and
+        integrates the velocity with the weights 1/6, 1/3, 1/3, 1/6 and the position with h_s^2 (f_0 + f_1 + f_2) / 6:
+        an O(h_s) impulse error per onset (first order) and an O(h_s^2) position error. RK4 integrates a force linear
+        in time exactly; ``onset_weights`` gives the g0, g1 that make up both deficits. theta is the root of the cubic
+        Hermite interpolant of the ball's deflection delta_r = e . u_r - P_d/2 through its values and rates at the
+        substep's ends (``onset_fraction``; of the last pass; the end of the step is ``end``)."""
         law = self.law
         if law.damping_model != DAMPING_CONSTANT or law.damping_coefficient == 0.0:
             return {}
-        C, half, hs = law.damping_coefficient, law.half_clearance, self._h_step / m
+        C, half, hs, om = law.damping_coefficient, law.half_clearance, self._h_step / m, self._omega
         points = dict(bounds)
         points[m] = (end.e_x, end.e_y, end.v_x, end.v_y)
         spacing = 2.0 * math.pi / law.n_balls
@@ -157,23 +173,29 @@ class LawModel(InterfaceJacobianImplicit):
             a, b = points.get(k), points.get(k + 1)
             if a is None or b is None:
                 continue
-            pa, pb = self._cage + self._omega * k * hs, self._cage + self._omega * (k + 1) * hs
-            gx = gy = 0.0
+            pa, pb = self._cage + om * k * hs, self._cage + om * (k + 1) * hs
+            g0x = g0y = g1x = g1y = 0.0
             for r in range(law.n_balls):
                 ca, sa = math.cos(pa + r * spacing), math.sin(pa + r * spacing)
                 cb, sb = math.cos(pb + r * spacing), math.sin(pb + r * spacing)
                 da, db = a[0] * ca + a[1] * sa - half, b[0] * cb + b[1] * sb - half
-                if not da <= 0.0 < db:
+                if not (da <= 0.0 and 0.0 < db):
                     continue
-                theta = da / (da - db)
+                ma = (a[2] * ca + a[3] * sa + om * (a[1] * ca - a[0] * sa)) * hs     # d delta_r / d sigma
+                mb = (b[2] * cb + b[3] * sb + om * (b[1] * cb - b[0] * sb)) * hs
+                theta = onset_fraction(da, db, ma, mb)
                 phi = pa + r * spacing + theta * (pb - pa)
                 ux, uy = math.cos(phi), math.sin(phi)
-                vr = (a[2] + theta * (b[2] - a[2])) * ux + (a[3] + theta * (b[3] - a[3])) * uy
-                w = (1.0 - theta) - (1.0 / 6.0 + (2.0 / 3.0 if theta < 0.5 else 0.0))
-                g = C * max(vr, 0.0) * w
-                gx, gy = gx + g * ux, gy + g * uy
-            if gx or gy:
-                out[k] = (gx, gy)
+                wa = (a[2] * ux + a[3] * uy) * C
+                wb = (b[2] * ux + b[3] * uy) * C
+                j = wa + theta * (wb - wa)
+                if not j > 0.0:
+                    continue
+                g0, g1 = onset_weights(theta, j, wb - wa)
+                g0x, g0y = g0x + g0 * ux, g0y + g0 * uy
+                g1x, g1y = g1x + g1 * ux, g1y + g1 * uy
+            if g0x != 0.0 or g0y != 0.0 or g1x != 0.0 or g1y != 0.0:
+                out[k] = (g0x, g0y, g1x, g1y)
         return out
 
     def substep_tangent(self) -> Exchanged:
@@ -201,13 +223,62 @@ class LawModel(InterfaceJacobianImplicit):
             self._bounds[k] = (e_x, e_y, v_x, v_y)
         g = self._onsets.get(k)
         if g is not None:
-            fx, fy = fx + g[0], fy + g[1]
+            sigma = 0.0 if stage == 0 else (1.0 if stage == 3 else 0.5)
+            fx, fy = fx + (g[0] + g[2] * sigma), fy + (g[1] + g[3] * sigma)
         r = s / self._h_step
         return (fx + self._c0[0] + r * (self._c1[0] - self._c0[0]),
                 fy + self._c0[1] + r * (self._c1[1] - self._c0[1]))
 
     def force_model(self, t0, h):
         return self._model if self.law is None else None
+
+    def end_mismatch(self, b: Exchanged) -> tuple[float, float] | None:
+        """On the first pass (no trial): the component's end force against this pass's force at the end state,
+        F* - F_law(e*, v*; phi_n + omega_m (t* - t_n)) - c_n = c* - c_n, what a second pass would ramp in (the
+        master's ``_next_pass_negligible`` predicts its effect); None on later passes, without a law, or when a
+        contact onset in this pass's substeps needs its correction (``_onset_corrections``: a second pass)."""
+        if self.law is None or self.trial is not None or self._onset_corrections(self._m, self._bounds, b):
+            return None
+        out = self._evaluate(b.e_x, b.e_y, b.v_x, b.v_y, self._cage + self._omega * (b.t - self._t_n), self._wi,
+                             self._wo)
+        return b.F_x - (float(out[0]) + self._c0[0]), b.F_y - (float(out[1]) + self._c0[1])
+
+
+def onset_fraction(da: float, db: float, ma: float, mb: float) -> float:
+    """The root theta in (0, 1] of the cubic Hermite interpolant through (da, ma) at sigma = 0 and (db, mb) at
+    sigma = 1 (a ball's deflection and its rate per substep, da <= 0 < db): Newton from the linear root, kept while
+    it stays in (0, 1] with a positive slope (four steps)."""
+    theta = da / (da - db)
+    for _ in range(4):
+        t2 = theta * theta
+        t3 = t2 * theta
+        p = (2.0 * t3 - 3.0 * t2 + 1.0) * da + (t3 - 2.0 * t2 + theta) * ma + (3.0 * t2 - 2.0 * t3) * db \
+            + (t3 - t2) * mb
+        dp = (6.0 * t2 - 6.0 * theta) * (da - db) + (3.0 * t2 - 4.0 * theta + 1.0) * ma + (3.0 * t2 - 2.0 * theta) * mb
+        if not dp > 0.0:
+            break
+        nxt = theta - p / dp
+        if not 0.0 < nxt <= 1.0:
+            break
+        theta = nxt
+    return theta
+
+
+def onset_weights(theta: float, j: float, d: float) -> tuple[float, float]:
+    """(g0, g1) [N]: the force g0 + g1 sigma over a substep that RK4 integrates exactly and that makes up RK4's
+    velocity and position deficits for a force switched on at sigma = theta with the value j, growing by d per
+    substep (eq. 18's damping jump at a contact onset; ``LawModel._onset_corrections``).
+
+    Exact: impulse h (j r + d r^2 / 2), first moment h^2 (j r^2 / 2 + d r^3 / 6), r = 1 - theta. RK4's, from its
+    stage values f_0 = 0, f_1 = f_2 = f_m = [theta < 1/2] (j + d (1/2 - theta)), f_3 = j + d r: h (4 f_m + f_3) / 6
+    and h^2 f_m / 3. g0 + g1 sigma adds h (g0 + g1 / 2) and h^2 (g0 / 2 + g1 / 6)."""
+    half = 1.0 if theta < 0.5 else 0.0
+    r = 1.0 - theta
+    fm = half * (j + d * (0.5 - theta))
+    f1 = j + d * r
+    a = j * r + d * r * r / 2.0 - (4.0 * fm + f1) / 6.0
+    b = j * r * r / 2.0 + d * r * r * r / 6.0 - fm / 3.0
+    return 6.0 * b - 2.0 * a, 6.0 * a - 12.0 * b
 
 
 def _eig_max(a: float, b: float, c: float) -> float:
