@@ -108,15 +108,17 @@ def cmd_run(args) -> int:
         write_outputs,
         write_run_table,
     )
+    from mechanism.output import stream
     from mechanism.run import interrupted, run, stop_on_signals
     from mechanism.ssp.config import config_from_ssp_args
     out = Path(args.out)
     check_output_folder(out)
     config = config_from_ssp_args(args) if args.ssp else config_from_args(args)
     PHASES.clear()
-    with output_lock(out), output_workers(not args.no_plots) as workers:
+    with output_lock(out), output_workers(not args.no_plots) as workers, \
+            stream.for_run(out, config, plots=not args.no_plots) as sink:
         marks = [start, time.perf_counter()]
-        result = run(config)
+        result = run(config, sink)     # timeseries.csv written as the samples are recorded (renamed when complete)
         marks.append(time.perf_counter())
         stopped = interrupted()
         wants_ideal = not stopped and config.joint != "ideal" and not args.no_ideal

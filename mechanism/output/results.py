@@ -63,18 +63,21 @@ def summary(r: RunResult) -> dict:
     result = {"status": r.status, "message": r.message, "meta": r.meta, "samples": len(t)}
     if len(t) == 0:
         return result
-    result["all"] = _figures(r, slice(None))
+    streamed = r.streamed      # a streamed run: the whole table's figures were accumulated as it was recorded
+    result["all"] = _figures(r, slice(None)) if streamed is None else dict(streamed.figures)
     energy = energy_summary(r)
     if energy is not None:
         result["energy"] = energy
     result["life"] = run_life(r)     # bearing rating life (docs/bearing-life.md); None for other joints
     half = 0.5 * float(r.meta.get("output_interval_s") or 0.0) + 1e-12   # the step count is rounded
     if period and t[-1] >= 2 * period - half:
+        window = r if streamed is None else streamed.window   # (a streamed run kept the rows of this window)
+        t = window["time"]
         # the samples with period - half <= t <= 2 period + half (the times rise): a slice, so views
         rev2 = slice(int(np.searchsorted(t, period - half, side="left")),
                      int(np.searchsorted(t, 2 * period + half, side="right")))
-        result["rev2"] = _figures(r, rev2)
-        result["rev2"]["life"] = run_life(r, (period, 2 * period))
+        result["rev2"] = _figures(window, rev2)
+        result["rev2"]["life"] = run_life(window, (period, 2 * period))
     return result
 
 
@@ -118,12 +121,17 @@ def output_lock(out: Path):
 CSV_CHUNK_ROWS = 256
 
 
+def csv_line(n: int) -> str:
+    """The format of a row of ``n`` numbers in timeseries.csv (csv.writer's row format and line end)."""
+    return ",".join(["%.10g"] * n) + "\r\n"
+
+
 def write_csv(r: RunResult, path: Path) -> None:
     """timeseries.csv: one header row 'name [unit]', then one row per sample (written atomically)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_open(path, "w", newline="") as f:
         csv.writer(f).writerow([f"{c} [{unit_of(c)}]" for c in r.columns])
-        line = ",".join(["%.10g"] * len(r.columns)) + "\r\n"     # csv.writer's row format and line end
+        line = csv_line(len(r.columns))
         for k in range(0, len(r.data), CSV_CHUNK_ROWS):   # a chunk at a time: no list of the whole file
             f.write("".join([line % row for row in map(tuple, r.data[k:k + CSV_CHUNK_ROWS].tolist())]))
 
@@ -350,7 +358,10 @@ def _write_csv_or_report(r: RunResult, path: Path, figures: dict, out: Path) -> 
     """``write_csv``; on an OSError (a full disk) summary.json with ``write_error`` (the small summary at least
     is kept), then the error is raised."""
     try:
-        write_csv(r, path)
+        if r.streamed is not None:   # written as it was recorded: renamed onto timeseries.csv now
+            r.streamed.stream.commit()
+        else:
+            write_csv(r, path)
     except OSError as err:
         figures["write_error"] = f"{err.strerror or err} writing {err.filename or out}"
         with contextlib.suppress(OSError):

@@ -1,0 +1,242 @@
+"""timeseries.csv written while the run records it (issue 11: a run's memory does not grow with its length).
+
+``TableStream`` is a ``record.Recorder``'s sink: each block of rows the master records (``record.STREAM_ROWS`` at a
+time, handed on as the compiled loop's chunks fill it) is appended to a temporary file beside timeseries.csv, and
+what the outputs need of the whole table is kept as it goes by: the columns ``keep`` (those summary.json compares
+with the ideal counterpart and, with plots, those the figures draw, at full resolution), the summary's peaks over
+all rows, the energy figures, the rows of the second revolution (``results.summary``'s window, all columns) and,
+asked for, the whole run's life from the recorded ball loads. The run's ``RunResult`` holds the kept columns and
+these figures (``Streamed``); ``results.write_run_table`` renames the file onto timeseries.csv (``commit``) where
+the in-memory table was written before, so the files are the same bytes as ``results.write_csv``'s and in the same
+order (a failed or interrupted run's file holds the rows up to then). A write error (a full disk) stops the
+writing and removes the file; the run goes on and ``commit`` raises the error (summary.json reports it, as before).
+"""
+from __future__ import annotations
+
+import contextlib
+import csv
+import math
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..cosim.record import ENERGY_LAST, RunResult, energy_figures, unit_of
+
+
+@dataclass
+class Streamed:
+    """What ``results.summary`` needs of a streamed run's whole table (``RunResult.streamed``)."""
+
+    columns: list[str]                 # the whole table's columns (timeseries.csv's)
+    figures: dict | None               # ``results._figures`` over all rows (None: no rows)
+    energy: dict | None                # ``record.energy_summary``'s figures
+    window: RunResult | None           # every column, the rows with period - margin <= t <= 2 period + margin
+    life: object | None                # the whole run's ``LifeAccumulator`` of the ball loads (when asked for)
+    stream: TableStream
+
+    @property
+    def ball_load_columns(self) -> list[str]:
+        return [c for c in self.columns if c.startswith("ball_load_")]
+
+
+class TableStream:
+    """A ``Recorder`` sink writing ``path`` (timeseries.csv) as the rows arrive; see the module docstring.
+
+    ``keep``: the columns kept in memory at full resolution (those of the table's that exist; also those named
+    ``keep_prefix``...); ``period``: the crank
+    period [s], whose second revolution is kept (all columns) within ``margin`` [s] (at least two sample
+    intervals); ``life``: the bearing's ``BearingParameters`` to accumulate the whole run's life from the recorded
+    ball loads (for a component without life outputs). Use as a context manager: the temporary file is removed if
+    it was not committed."""
+
+    def __init__(self, path: Path, keep: tuple[str, ...], period: float | None = None, margin: float = 0.0,
+                 life=None, keep_prefix: str | None = None):
+        self.path = Path(path)
+        self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")    # atomic_open's name
+        self.keep, self.period, self.margin, self.life_params = tuple(keep), period, margin, life
+        self.keep_prefix = keep_prefix
+        self.file = None
+        self.error: OSError | None = None
+        self.committed = False
+        self.columns: list[str] = []
+
+    # ------------------------------------------------------------------------------------ the Recorder's side
+    def open(self, columns: list[str], capacity: int) -> None:
+        """Start a table of ``columns`` (about ``capacity`` rows): the file with its header, the accumulators."""
+        from .results import csv_line
+        self.columns = list(columns)
+        self.index = {c: k for k, c in enumerate(self.columns)}
+        self.kept = [c for c in self.columns
+                     if c in self.keep or (self.keep_prefix is not None and c.startswith(self.keep_prefix))]
+        self._kept_index = [self.index[c] for c in self.kept]
+        self._table = np.empty((max(capacity, 1), len(self.kept)))   # pages touched only as rows arrive
+        self.rows = 0
+        self._line = csv_line(len(self.columns))
+        self._figures: dict | None = None
+        self._worst: float | None = None
+        self._last: np.ndarray | None = None
+        self._window: list[np.ndarray] = []
+        self._before: np.ndarray | None = None     # the last row before the window (its first sample's interval)
+        self._life = self._life_cols = None
+        if self.life_params is not None:
+            from fmu_bearing.life import LifeAccumulator, LoadRatings
+            self._life = LifeAccumulator(LoadRatings.of_bearing(self.life_params), self.life_params.reliability_factor)
+            names = [f"ball_load_{r + 1}" for r in range(int(self.life_params.n_balls))]
+            if all(n in self.index for n in names):   # (else nothing is added, as in life_from_samples)
+                self._life_cols = [self.index[n] for n in names]
+        self._life_t: float | None = None
+        try:
+            self.file = open(self.tmp, "w", newline="")
+            csv.writer(self.file).writerow([f"{c} [{unit_of(c)}]" for c in self.columns])
+        except OSError as err:
+            self._failed(err)
+
+    def write(self, block: np.ndarray) -> None:
+        """Append the rows ``block`` (a view the Recorder reuses: nothing of it is kept by reference)."""
+        if self.file is not None:
+            from .results import CSV_CHUNK_ROWS
+            try:
+                for k in range(0, len(block), CSV_CHUNK_ROWS):
+                    self.file.write("".join([self._line % row for row in map(tuple, block[k:k + CSV_CHUNK_ROWS].tolist())]))
+            except OSError as err:
+                self._failed(err)
+        n = len(block)
+        if self.rows + n > len(self._table):
+            self._table = np.concatenate([self._table, np.empty_like(self._table)])
+        self._table[self.rows:self.rows + n] = block[:, self._kept_index]
+        self.rows += n
+        self._accumulate(block)
+
+    def result(self, meta: dict, status: str, message: str) -> RunResult:
+        """The run's ``RunResult``: the kept columns, and the whole table's figures in ``streamed``; the file is
+        complete (closed) but not yet renamed onto ``path`` (``commit``)."""
+        self._close()
+        data = self._table[:self.rows] if self.rows + 1 >= len(self._table) else self._table[:self.rows].copy()
+        self._table = None
+        window = None
+        if self._window:
+            window = RunResult(self.columns, np.concatenate(self._window), meta, status, message)
+        self._window = []
+        energy = None
+        if "energy_residual" in self.index and self._last is not None:
+            energy = energy_figures({c: float(self._last[self.index[c]]) for c in ENERGY_LAST}, self._worst_value())
+        streamed = Streamed(self.columns, self._figures, energy, window, self._life, self)
+        return RunResult(self.kept, data, meta, status, message, streamed)
+
+    # ----------------------------------------------------------------------------------------- accumulating
+    def _accumulate(self, block: np.ndarray) -> None:
+        from .results import _figures
+        if not len(block):
+            return
+        part = RunResult(self.columns, block)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)   # an all-NaN block: its NaN is ignored below
+            figures = _figures(part, slice(None))
+        self._figures = figures if self._figures is None else {
+            key: _combine(key, value, figures[key]) for key, value in self._figures.items()}
+        if "energy_residual" in self.index:
+            residual = block[:, self.index["energy_residual"]]
+            magnitude = np.abs(residual)
+            if not np.all(np.isnan(magnitude)):
+                k = int(np.nanargmax(magnitude))     # the first of the largest, as over the whole column
+                if self._worst is None or magnitude[k] > abs(self._worst):
+                    self._worst = float(residual[k])
+        self._last = block[-1].copy()
+        if self.period is not None:   # the second revolution's rows, and the one before them
+            t = block[:, 0]
+            lo, hi = self.period - self.margin, 2 * self.period + self.margin
+            a, b = int(np.searchsorted(t, lo, side="left")), int(np.searchsorted(t, hi, side="right"))
+            if b > a:
+                if not self._window and a == 0 and self._before is not None:
+                    self._window.append(self._before[None, :])
+                self._window.append(block[a - 1 if not self._window and a > 0 else a:b].copy())
+            self._before = self._last
+        if self._life_cols is not None:
+            self._add_life(block)
+
+    def _add_life(self, block: np.ndarray) -> None:
+        """``life.life_from_samples`` over the whole run, a row at a time (the loads of sample k held over
+        (t_{k-1}, t_k])."""
+        t = block[:, 0].tolist()
+        w_i = block[:, self.index["omega_inner"]].tolist()
+        w_o = block[:, self.index["omega_outer"]].tolist()
+        loads = block[:, self._life_cols]
+        finite = np.all(np.isfinite(loads), axis=1).tolist()
+        loads = loads.tolist()
+        previous = self._life_t
+        for k, tk in enumerate(t):
+            if previous is not None and tk - previous > 0 and finite[k]:
+                self._life.add(loads[k], w_i[k], w_o[k], tk - previous)
+            previous = tk
+        self._life_t = previous
+
+    def _worst_value(self) -> float:
+        if self._worst is None:    # every residual NaN: as ``np.nanargmax`` over the whole column (it raises)
+            return float(np.nanargmax(np.array([math.nan])))
+        return self._worst
+
+    # ------------------------------------------------------------------------------------------ the file
+    def _failed(self, err: OSError) -> None:
+        """A write error: no more writing, the file removed; ``commit`` raises ``err``."""
+        if self.error is None:
+            self.error = err
+        if self.file is not None:
+            with contextlib.suppress(OSError):
+                self.file.close()
+            self.file = None
+        with contextlib.suppress(OSError):
+            self.tmp.unlink()
+
+    def _close(self) -> None:
+        if self.file is not None:
+            try:
+                self.file.close()
+            except OSError as err:
+                self._failed(err)
+            self.file = None
+
+    def commit(self) -> None:
+        """Rename the complete file onto ``path`` (the write error, if any, raised instead)."""
+        self._close()
+        if self.error is not None:
+            raise self.error
+        os.replace(self.tmp, self.path)
+        self.committed = True
+
+    def discard(self) -> None:
+        """Remove the file unless it was committed."""
+        self._close()
+        if not self.committed:
+            with contextlib.suppress(OSError):
+                self.tmp.unlink()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.discard()
+        return False
+
+
+def _combine(key: str, a, b):
+    """Two blocks' peak figure ``key`` combined as over their rows together (NaN only where both are)."""
+    if a is None or b is None:
+        return a if b is None else b
+    if math.isnan(a):
+        return b
+    if math.isnan(b):
+        return a
+    return min(a, b) if key.endswith("_min_m_s2") or key.endswith("_min_N_m") else max(a, b)
+
+
+def for_run(out: Path, config, plots: bool) -> TableStream:
+    """The stream of ``python -m mechanism run``'s timeseries.csv in ``out`` for ``config`` (a ``RunConfig``): it keeps
+    the columns summary.json compares with the ideal counterpart and, with ``plots``, those the figures draw, and the
+    second revolution's rows (within two sample intervals and two steps)."""
+    from .results import COMPARED, PLOTTED
+    keep = COMPARED + (PLOTTED if plots else ())
+    return TableStream(Path(out) / "timeseries.csv", keep, config.crank_period,
+                       2.0 * (config.output_interval + config.step), keep_prefix="ball_load_" if plots else None)
