@@ -181,31 +181,62 @@ def energy_figures(last: dict[str, float], worst: float) -> dict:
 RESAMPLE_GROUP = 4
 
 
-def resample(result: RunResult, times: np.ndarray) -> RunResult:
+def resample(result: RunResult, times: np.ndarray, sink=None) -> RunResult:
     """``result`` at other sample times, by a cubic spline through each column (times within its range;
     ``meta["resampled_from_s"]`` keeps the original sampling interval).
 
     The spline is scipy's ``CubicSpline`` (not-a-knot) to the bit, computed by ``mechanism.cosim.spline``
-    without importing scipy.interpolate; columns with non-finite values are interpolated linearly."""
+    without importing scipy.interpolate; columns with non-finite values are interpolated linearly.
+    ``sink`` (a ``Recorder`` sink, ``mechanism.output.stream.TableStream``): the rows are made ``STREAM_ROWS`` at a
+    time and handed to it (the same numbers: the spline and the interpolation are evaluated point by point), and
+    the result is the sink's; the resampled table is never whole in memory."""
     from mechanism.cosim.spline import NotAKnotSpline
     t = result["time"]
     times = np.asarray(times, float)
     times = times[times <= t[-1] * (1 + 1e-12)]
+    meta = dict(result.meta, resampled_from_s=float(t[1] - t[0]) if len(t) > 1 else 0.0)
+    finite = [k for k in range(1, len(result.columns)) if np.all(np.isfinite(result.data[:, k]))]
+    groups = [finite[g:g + RESAMPLE_GROUP] for g in range(0, len(finite), RESAMPLE_GROUP)]
+    if sink is not None:
+        return _resample_into(sink, result, times, finite, groups, meta)
     data = np.empty((len(times), len(result.columns)))    # filled column by column: no second copy
     data[:, 0] = times
-    finite = []
     for k in range(1, len(result.columns)):
-        column = result.data[:, k]
-        if np.all(np.isfinite(column)):
-            finite.append(k)
-        else:
-            data[:, k] = np.interp(times, t, column)
-    for g in range(0, len(finite), RESAMPLE_GROUP):
-        cols = finite[g:g + RESAMPLE_GROUP]
+        if k not in finite:
+            data[:, k] = np.interp(times, t, result.data[:, k])
+    for cols in groups:
         spline = NotAKnotSpline(t, result.data[:, cols])
         if cols == list(range(cols[0], cols[-1] + 1)):   # adjacent columns: evaluated straight into the table
             spline.evaluate_into(times, data[:, cols[0]:cols[-1] + 1])
         else:
             data[:, cols] = spline(times)
-    meta = dict(result.meta, resampled_from_s=float(t[1] - t[0]) if len(t) > 1 else 0.0)
     return RunResult(result.columns, data, meta, result.status, result.message)
+
+
+def _resample_into(sink, result: RunResult, times: np.ndarray, finite: list[int], groups: list[list[int]],
+                   meta: dict) -> RunResult:
+    """``resample``'s rows handed to ``sink`` a block at a time: every column's spline is made first, keeping its
+    knot slopes only (``NotAKnotSpline``'s ``lazy``: n x m numbers, not the 4 x n x m coefficients)."""
+    from mechanism.cosim.spline import NotAKnotSpline
+    t, data = result["time"], result.data
+    splines = []
+    for cols in groups:
+        adjacent = cols == list(range(cols[0], cols[-1] + 1))
+        y = data[:, cols[0]:cols[-1] + 1] if adjacent else data[:, cols]    # a view where it can be
+        splines.append((cols, adjacent, NotAKnotSpline(t, y, lazy=True)))
+    linear = [k for k in range(1, len(result.columns)) if k not in finite]
+    sink.open(result.columns, len(times))
+    block = np.empty((min(STREAM_ROWS, max(len(times), 1)), len(result.columns)))
+    for k in range(0, len(times), STREAM_ROWS):
+        x = times[k:k + STREAM_ROWS]
+        rows = block[:len(x)]
+        rows[:, 0] = x
+        for j in linear:
+            rows[:, j] = np.interp(x, t, data[:, j])
+        for cols, adjacent, spline in splines:
+            if adjacent:
+                spline.evaluate_into(x, rows[:, cols[0]:cols[-1] + 1])
+            else:
+                rows[:, cols] = spline(x)
+        sink.write(rows)
+    return sink.result(meta, result.status, result.message)

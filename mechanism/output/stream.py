@@ -240,3 +240,13 @@ def for_run(out: Path, config, plots: bool) -> TableStream:
     keep = COMPARED + (PLOTTED if plots else ())
     return TableStream(Path(out) / "timeseries.csv", keep, config.crank_period,
                        2.0 * (config.output_interval + config.step), keep_prefix="ball_load_" if plots else None)
+
+
+def for_ideal(out: Path, config, plots: bool) -> TableStream:
+    """The stream of the ideal counterpart's ideal_timeseries.csv in ``out``, resampled onto the run's sample times
+    (``record.resample``): it keeps the columns summary.json compares and, with ``plots``, those its curves in the
+    figures read (``results.DRAWN_WITH_IDEAL``)."""
+    from .results import COMPARED, DRAWN_WITH_IDEAL
+    keep = COMPARED + (DRAWN_WITH_IDEAL if plots else ())
+    return TableStream(Path(out) / "ideal_timeseries.csv", keep, config.crank_period,
+                       2.0 * (config.output_interval + config.step))
