@@ -97,6 +97,7 @@ PHASES: dict[str, float] = {}
 
 def cmd_run(args) -> int:
     start = time.perf_counter()
+    from mechanism.output import stream
     from mechanism.output.results import (
         COMPARED,
         DRAWN_WITH_IDEAL,
@@ -108,7 +109,6 @@ def cmd_run(args) -> int:
         write_outputs,
         write_run_table,
     )
-    from mechanism.output import stream
     from mechanism.run import interrupted, run, stop_on_signals
     from mechanism.ssp.config import config_from_ssp_args
     out = Path(args.out)

@@ -89,7 +89,7 @@ class TableStream:
                 self._life_cols = [self.index[n] for n in names]
         self._life_t: float | None = None
         try:
-            self.file = open(self.tmp, "w", newline="")
+            self.file = open(self.tmp, "w", newline="")   # noqa: SIM115 - open across writes; closed by _close
             csv.writer(self.file).writerow([f"{c} [{unit_of(c)}]" for c in self.columns])
         except OSError as err:
             self._failed(err)
@@ -229,7 +229,7 @@ def _combine(key: str, a, b):
         return b
     if math.isnan(b):
         return a
-    return min(a, b) if key.endswith("_min_m_s2") or key.endswith("_min_N_m") else max(a, b)
+    return min(a, b) if key.endswith(("_min_m_s2", "_min_N_m")) else max(a, b)
 
 
 def for_run(out: Path, config, plots: bool) -> TableStream:
