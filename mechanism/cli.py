@@ -117,7 +117,8 @@ def cmd_run(args) -> int:
     PHASES.clear()
     # the streams' files are removed unless they were completed (renamed onto timeseries.csv, ideal_timeseries.csv)
     with output_lock(out), output_workers(not args.no_plots) as workers, \
-            stream.for_run(out, config, plots=not args.no_plots) as sink, \
+            stream.for_run(out, config, not args.no_plots, workers, config.joint != "ideal" and not args.no_ideal) \
+            as sink, \
             stream.for_ideal(out, config, plots=not args.no_plots) as ideal_sink:
         marks = [start, time.perf_counter()]
         result = run(config, sink)     # timeseries.csv written as the samples are recorded (renamed when complete)

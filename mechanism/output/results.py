@@ -229,17 +229,35 @@ REST = (("slider_acceleration.png", "joint_force.png"), ("crank_moment.png", "sl
 DRAWN_WITH_IDEAL = ("time", "crank_angle", "slider_a", "crank_moment", "F_x", "F_y", "slider_x")
 
 
+def run_only_columns(columns: list[str]) -> tuple[str, ...]:
+    """The columns of ``columns`` that only ``RUN_ONLY``'s figures read (with the crank angle and the time): a streamed
+    run hands them to the first output worker during the run (``stream.for_run``)."""
+    return tuple(c for c in columns if c in ("time", "crank_angle") or c.startswith("ball_load_")
+                 or (c in PLOTTED and c not in DRAWN_WITH_IDEAL))
+
+
 def start_run_plots(result: RunResult, out: Path, workers) -> tuple | None:
     """Hand the first output worker ``RUN_ONLY``'s figures of ``result`` (its plotted columns as raw bytes), so
     that the command can write the run's table and let it go before the ideal counterpart runs (issue 11);
     ``finish_outputs`` collects them. None if there is no worker to take them (then keep the whole table)."""
     from mechanism.output.workers import ColumnsOf
+    stream = result.streamed.stream if result.streamed is not None else None
     if workers is None or len(result["time"]) <= 1:
+        if stream is not None and stream.gather_names:
+            _read_back(result)
         return None
     remove_previous(out, FIGURES)
-    names = plotted_columns(result)
-    if not workers.submit(0, "plots", ColumnsOf(result, names), Path(out), None, names=RUN_ONLY):
-        return None
+    if stream is not None and stream.gather_names:   # the columns went to the worker during the run: the rest now
+        names = stream.gather_names
+        tail = stream.tail()
+        if tail is None or not workers.submit(0, "plots_gathered", ColumnsOf(tail, names), Path(out), None,
+                                              names=RUN_ONLY):
+            _read_back(result)
+            return None
+    else:
+        names = plotted_columns(result)
+        if not workers.submit(0, "plots", ColumnsOf(result, names), Path(out), None, names=RUN_ONLY):
+            return None
     # should the worker die, the figures are drawn in-process from timeseries.csv (written by then), with the
     # run's meta, status and message (the CSV has none: ball count and titles come from the meta)
     meta, status, message = result.meta, result.status, result.message
@@ -248,6 +266,17 @@ def start_run_plots(result: RunResult, out: Path, workers) -> tuple | None:
         r = read_csv(Path(out) / "timeseries.csv")
         return RunResult(r.columns, r.data, meta, status, message)
     return 0, ColumnsOf(reread, names)
+
+
+def _read_back(result: RunResult) -> None:
+    """A streamed run whose gathered columns are not with a worker (it died): the columns it lacks read back from its
+    complete timeseries.csv (its own kept columns stay as they are), so that it can be drawn here."""
+    stream = result.streamed.stream
+    back = read_csv(stream.path if stream.committed else stream.tmp)
+    data = np.empty((len(result.data), len(back.columns)))
+    for k, name in enumerate(back.columns):
+        data[:, k] = result[name] if result.has(name) else back[name]
+    result.columns, result.data = back.columns, data
 
 
 def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult | None, workers, drawing: tuple,
@@ -330,8 +359,8 @@ COMPARED = ("time", "slider_a", "slider_x")
 def compared_columns(result: RunResult, keep: tuple[str, ...] = COMPARED) -> RunResult:
     """``result`` reduced to the columns ``keep`` (default those ``write_ideal_tables`` compares, ``COMPARED``;
     ``result`` itself when it already is)."""
-    if tuple(result.columns) == keep:
-        return result
+    if tuple(result.columns) == keep or set(result.columns) == {c for c in keep if result.has(c)}:
+        return result   # (it has those columns only: in another order, a copy would be all it made)
     names = [c for c in keep if result.has(c)]
     data = np.empty((len(result.data), len(names)))
     for k, name in enumerate(names):

@@ -25,6 +25,9 @@ import numpy as np
 
 from ..cosim.record import ENERGY_LAST, RunResult, energy_figures, unit_of
 
+#: bytes of gathered columns held before they go to the output worker (``TableStream``'s ``gather``)
+GATHER_BYTES = 2_000_000
+
 
 @dataclass
 class Streamed:
@@ -49,15 +52,22 @@ class TableStream:
     ``keep_prefix``...); ``period``: the crank
     period [s], whose second revolution is kept (all columns) within ``margin`` [s] (at least two sample
     intervals); ``life``: the bearing's ``BearingParameters`` to accumulate the whole run's life from the recorded
-    ball loads (for a component without life outputs). Use as a context manager: the temporary file is removed if
-    it was not committed."""
+    ball loads (for a component without life outputs). ``gather``: ``(workers, select)``, the columns ``select``
+    picks of the table's (those the figures of the run alone read, ``results.run_only_columns``) go to the first output worker ``GATHER_BYTES`` at
+    a time instead of staying here (``results.start_run_plots`` sends the rest with the job; ``gathered``, ``lost``).
+    Use as a context manager: the temporary file is removed if it was not committed."""
 
     def __init__(self, path: Path, keep: tuple[str, ...], period: float | None = None, margin: float = 0.0,
-                 life=None, keep_prefix: str | None = None):
+                 life=None, keep_prefix: str | None = None, gather: tuple | None = None):
         self.path = Path(path)
         self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")    # atomic_open's name
         self.keep, self.period, self.margin, self.life_params = tuple(keep), period, margin, life
         self.keep_prefix = keep_prefix
+        self.workers, self._select = gather if gather is not None else (None, lambda columns: ())
+        self.gather_names: tuple[str, ...] = ()
+        self.gathered = 0          # rows the worker holds
+        self.lost = False          # the worker could not take a block: the gathered columns are to be read back
+        self.meta: dict = {}
         self.file = None
         self.error: OSError | None = None
         self.committed = False
@@ -88,6 +98,12 @@ class TableStream:
             if all(n in self.index for n in names):   # (else nothing is added, as in life_from_samples)
                 self._life_cols = [self.index[n] for n in names]
         self._life_t: float | None = None
+        self.gather_names = tuple(self._select(self.columns))
+        self._gather_index = [self.index[c] for c in self.gather_names]
+        self._pending = None       # the gathered columns' rows not yet sent (column-major)
+        self._held = 0
+        if self.workers is not None and self._gather_index:
+            self._pending = np.empty((len(self._gather_index), max(1, GATHER_BYTES // (8 * len(self._gather_index)))))
         try:
             self.file = open(self.tmp, "w", newline="")   # noqa: SIM115 - open across writes; closed by _close
             csv.writer(self.file).writerow([f"{c} [{unit_of(c)}]" for c in self.columns])
@@ -108,12 +124,46 @@ class TableStream:
             self._table = np.concatenate([self._table, np.empty_like(self._table)])
         self._table[self.rows:self.rows + n] = block[:, self._kept_index]
         self.rows += n
+        if self._pending is not None:
+            self._hold(block)
         self._accumulate(block)
+
+    def _hold(self, block: np.ndarray) -> None:
+        """The gathered columns of ``block`` into the pending buffer, which goes to the worker when full."""
+        pending, k = self._pending, 0
+        while k < len(block) and self._pending is not None:
+            n = min(len(block) - k, pending.shape[1] - self._held)
+            pending[:, self._held:self._held + n] = block[k:k + n, self._gather_index].T
+            self._held += n
+            k += n
+            if self._held == pending.shape[1]:
+                self._send()
+
+    def _send(self) -> None:
+        """The pending rows to the worker (``OutputWorkers.gather``); if it cannot take them, gathering stops
+        (``lost``: ``results.start_run_plots`` reads those columns back from the file)."""
+        from .workers import ColumnsOf
+        part = RunResult(list(self.gather_names), self._pending[:, :self._held].T)
+        if self.workers.gather(0, ColumnsOf(part, self.gather_names)):
+            self.gathered += self._held
+            self._held = 0
+        else:
+            self.lost = True
+            self._pending = None
+
+    def tail(self) -> RunResult | None:
+        """The gathered columns' rows not yet sent (with the run's meta, status and message), handed over once:
+        None if the gathering was lost."""
+        if self._pending is None:
+            return None
+        data, self._pending = self._pending[:, :self._held].T, None
+        return RunResult(list(self.gather_names), data, self.meta, self.status, self.message)
 
     def result(self, meta: dict, status: str, message: str) -> RunResult:
         """The run's ``RunResult``: the kept columns, and the whole table's figures in ``streamed``; the file is
         complete (closed) but not yet renamed onto ``path`` (``commit``)."""
         self._close()
+        self.meta, self.status, self.message = meta, status, message
         data = self._table[:self.rows] if self.rows + 1 >= len(self._table) else self._table[:self.rows].copy()
         self._table = None
         window = None
@@ -232,14 +282,19 @@ def _combine(key: str, a, b):
     return min(a, b) if key.endswith(("_min_m_s2", "_min_N_m")) else max(a, b)
 
 
-def for_run(out: Path, config, plots: bool) -> TableStream:
+def for_run(out: Path, config, plots: bool, workers=None, ideal: bool = True) -> TableStream:
     """The stream of ``python -m mechanism run``'s timeseries.csv in ``out`` for ``config`` (a ``RunConfig``): it keeps
     the columns summary.json compares with the ideal counterpart and, with ``plots``, those the figures draw, and the
-    second revolution's rows (within two sample intervals and two steps)."""
-    from .results import COMPARED, PLOTTED
-    keep = COMPARED + (PLOTTED if plots else ())
+    second revolution's rows (within two sample intervals and two steps). With plots, output ``workers`` and an
+    ``ideal`` counterpart to come (``results.start_run_plots``), the columns only the figures of the run alone read
+    go to the first worker during the run (``gather``): those of the figures with the ideal curve stay."""
+    from .results import COMPARED, DRAWN_WITH_IDEAL, PLOTTED, run_only_columns
+    gather = plots and ideal and workers is not None and len(workers) > 0
+    keep = COMPARED + (DRAWN_WITH_IDEAL if gather else PLOTTED if plots else ())
     return TableStream(Path(out) / "timeseries.csv", keep, config.crank_period,
-                       2.0 * (config.output_interval + config.step), keep_prefix="ball_load_" if plots else None)
+                       2.0 * (config.output_interval + config.step),
+                       keep_prefix="ball_load_" if plots and not gather else None,
+                       gather=(workers, run_only_columns) if gather else None)
 
 
 def for_ideal(out: Path, config, plots: bool) -> TableStream:
