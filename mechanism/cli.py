@@ -119,7 +119,7 @@ def cmd_run(args) -> int:
     with output_lock(out), output_workers(not args.no_plots) as workers, \
             stream.for_run(out, config, not args.no_plots, workers, config.joint != "ideal" and not args.no_ideal) \
             as sink, \
-            stream.for_ideal(out, config, plots=not args.no_plots) as ideal_sink:
+            stream.for_ideal(out, config, not args.no_plots, workers) as ideal_sink:
         marks = [start, time.perf_counter()]
         result = run(config, sink)     # timeseries.csv written as the samples are recorded (renamed when complete)
         marks.append(time.perf_counter())
@@ -207,7 +207,8 @@ def ideal_counterpart(config: RunConfig, result, workers=None, sink=None):
                         output_interval=max(step, config.output_interval)))
     if ideal.ok and len(ideal.data) > 1 and ideal.meta.get("output_interval_s") != result.meta.get("output_interval_s"):
         if sink is not None:
-            return resample(ideal, result["time"], sink)
+            from mechanism.output.stream import resample_ideal
+            return resample_ideal(ideal, result["time"], sink)
         ideal = workers.call(0, "resample", ideal, result["time"]) if workers else resample(ideal, result["time"])
     return ideal
 

@@ -193,7 +193,10 @@ def resample(result: RunResult, times: np.ndarray, sink=None) -> RunResult:
     from mechanism.cosim.spline import NotAKnotSpline
     t = result["time"]
     times = np.asarray(times, float)
-    times = times[times <= t[-1] * (1 + 1e-12)]
+    within = times <= t[-1] * (1 + 1e-12)
+    if not np.all(within):    # (else no copy)
+        times = times[within]
+    del within
     meta = dict(result.meta, resampled_from_s=float(t[1] - t[0]) if len(t) > 1 else 0.0)
     finite = [k for k in range(1, len(result.columns)) if np.all(np.isfinite(result.data[:, k]))]
     groups = [finite[g:g + RESAMPLE_GROUP] for g in range(0, len(finite), RESAMPLE_GROUP)]

@@ -179,16 +179,16 @@ def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, 
         from mechanism.output.workers import ColumnsOf
         from mechanism.output.workers import shares as shares_of
         run_sent = ColumnsOf(result, plotted_columns(result))     # only the plotted columns, as raw bytes
-        ideal_sent = None if ideal is None else ColumnsOf(ideal, plotted_columns(ideal))
+        job, ideal_sent = _ideal_sent(ideal)
         shares = [(k, names) for k, names in enumerate(shares_of(len(workers)))
-                  if workers.submit(k, "plots", run_sent, out, ideal_sent, names=names)]
+                  if workers.submit(k, job, run_sent, out, ideal_sent, names=names)]
     try:
         figures = _write_tables(result, out, ideal)
     finally:   # the workers' files are complete before anything else happens (an error is raised after)
         drawn = {}
         for k, names in shares:
             try:
-                drawn[names] = workers.result(k, "plots", result, out, ideal, names=names)
+                drawn[names] = workers.result(k, job, result, out, _ideal_source(ideal), names=names)
             except BaseException as err:   # noqa: BLE001 - raised below, after the other share is complete
                 drawn[names] = err
     plotted = []
@@ -200,7 +200,7 @@ def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, 
         rest = tuple(name for name in FIGURES if not any(name in names for names in drawn))
         if rest:   # no worker (or one that could not take its share): drawn here
             from mechanism.output.plots import plot_run
-            plotted += plot_run(result, out, ideal, names=rest)
+            plotted += plot_run(result, out, _ideal_here(ideal, result), names=rest)
         order = {name: k for k, name in enumerate(FIGURES)}
         plotted.sort(key=lambda path: order[Path(path).name])
     figures["plots"] = [str(p) for p in plotted]   # returned only (summary.json is written before the plots)
@@ -292,23 +292,23 @@ def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult
     shares = (REST[0], REST[1]) if len(workers) > 1 else (REST[0] + REST[1],)
     shares = tuple(tuple(name for name in FIGURES if name in share) for share in shares) if plots else ()
     sent = ColumnsOf(result, tuple(c for c in result.columns if c in DRAWN_WITH_IDEAL))
-    ideal_sent = None if ideal is None else ColumnsOf(ideal, plotted_columns(ideal))
+    job, ideal_sent = _ideal_sent(ideal)
     drawn, errors = [], []
 
-    def collect(j: int, *args, **kwargs) -> None:
+    def collect(j: int, *args, job: str = job, **kwargs) -> None:
         try:
-            drawn.extend(workers.result(j, "plots", *args, **kwargs))
+            drawn.extend(workers.result(j, job, *args, **kwargs))
         except BaseException as err:   # noqa: BLE001 - raised below, once the tables are written
             errors.append(err)
 
     def submit(j: int, names: tuple[str, ...]) -> list:
-        return [(j, names)] if workers.submit(j, "plots", sent, out, ideal_sent, names=names) else []
+        return [(j, names)] if workers.submit(j, job, sent, out, ideal_sent, names=names) else []
 
     submitted = submit(1, shares[0]) if len(shares) > 1 else []
     try:
         figures = write_ideal_tables(figures, result, out, ideal)
     finally:   # the workers' files are complete before anything else happens
-        collect(k, fallback, out, None, names=RUN_ONLY)
+        collect(k, fallback, out, None, names=RUN_ONLY, job="plots")
     if not errors:   # the first worker's next share (sent now: it reads it at once, the command does not wait)
         submitted += [share for names in shares[len(submitted):] for share in submit(k, names)]
     for j, names in submitted:
@@ -318,10 +318,37 @@ def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult
     rest = [name for names in shares if not any(names == done for _, done in submitted) for name in names]
     if rest:   # no worker could take them: drawn here
         from mechanism.output.plots import plot_run
-        drawn += plot_run(result, out, ideal, names=tuple(rest))
+        drawn += plot_run(result, out, _ideal_here(ideal, result), names=tuple(rest))
     order = {name: n for n, name in enumerate(FIGURES)}
     figures["plots"] = [str(p) for p in sorted(drawn, key=lambda path: order[Path(path).name])]
     return figures
+
+
+def _ideal_source(ideal: RunResult | None) -> RunResult | None:
+    """The ideal counterpart's table the figures read: a streamed one's ``source`` (at its own sample times) if it has
+    one, else itself."""
+    source = ideal.streamed.source if ideal is not None and ideal.streamed is not None else None
+    return ideal if source is None else source
+
+
+def _ideal_sent(ideal: RunResult | None) -> tuple:
+    """The workers' job for figures with the ideal curve and the ideal's columns to send: ``plots_resampled`` with
+    ``Streamed.source`` (resampled there) or ``plots`` with the ideal's plotted columns."""
+    from mechanism.output.workers import ColumnsOf
+    source = _ideal_source(ideal)
+    if source is None:
+        return "plots", None
+    job = "plots" if source is ideal else "plots_resampled"
+    return job, ColumnsOf(source, plotted_columns(source))
+
+
+def _ideal_here(ideal: RunResult | None, result: RunResult) -> RunResult | None:
+    """The ideal counterpart for figures drawn in this process: a streamed one's ``source`` resampled again."""
+    source = _ideal_source(ideal)
+    if source is ideal or source is None:
+        return ideal
+    from mechanism.cosim.record import resample
+    return resample(source, result["time"])
 
 
 def _write_tables(result: RunResult, out: Path, ideal: RunResult | None) -> dict:

@@ -39,6 +39,9 @@ class Streamed:
     window: RunResult | None           # every column, the rows with period - margin <= t <= 2 period + margin
     life: object | None                # the whole run's ``LifeAccumulator`` of the ball loads (when asked for)
     stream: TableStream
+    #: a resampled ideal counterpart's table at its own sample times (``results.DRAWN_WITH_IDEAL``): the figures
+    #: resample it where they are drawn (``workers._plots_resampled``) instead of the command keeping those columns
+    source: RunResult | None = None
 
     @property
     def ball_load_columns(self) -> list[str]:
@@ -297,11 +300,26 @@ def for_run(out: Path, config, plots: bool, workers=None, ideal: bool = True) ->
                        gather=(workers, run_only_columns) if gather else None)
 
 
-def for_ideal(out: Path, config, plots: bool) -> TableStream:
+def for_ideal(out: Path, config, plots: bool, workers=None) -> TableStream:
     """The stream of the ideal counterpart's ideal_timeseries.csv in ``out``, resampled onto the run's sample times
-    (``record.resample``): it keeps the columns summary.json compares and, with ``plots``, those its curves in the
-    figures read (``results.DRAWN_WITH_IDEAL``)."""
+    (``resample_ideal``): it keeps the columns summary.json compares and, with ``plots``, those its curves in the
+    figures read (``results.DRAWN_WITH_IDEAL``), unless output ``workers`` draw them (then they resample those
+    columns of the ideal's own table themselves: ``Streamed.source``)."""
     from .results import COMPARED, DRAWN_WITH_IDEAL
-    keep = COMPARED + (DRAWN_WITH_IDEAL if plots else ())
-    return TableStream(Path(out) / "ideal_timeseries.csv", keep, config.crank_period,
-                       2.0 * (config.output_interval + config.step))
+    elsewhere = plots and workers is not None and len(workers) > 0
+    stream = TableStream(Path(out) / "ideal_timeseries.csv", COMPARED + (DRAWN_WITH_IDEAL if plots and not elsewhere
+                                                                         else ()),
+                         config.crank_period, 2.0 * (config.output_interval + config.step))
+    stream.figures_elsewhere = elsewhere
+    return stream
+
+
+def resample_ideal(ideal: RunResult, times: np.ndarray, sink: TableStream) -> RunResult:
+    """``record.resample`` of the ideal counterpart onto ``times`` into ``sink`` (``for_ideal``); with its figures drawn
+    by the workers, the columns they read of ``ideal`` itself go with the result (``Streamed.source``)."""
+    from ..cosim.record import resample
+    from .results import DRAWN_WITH_IDEAL, compared_columns
+    source = compared_columns(ideal, DRAWN_WITH_IDEAL) if getattr(sink, "figures_elsewhere", False) else None
+    result = resample(ideal, times, sink)
+    result.streamed.source = source
+    return result

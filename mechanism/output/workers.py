@@ -82,7 +82,15 @@ def _plots_gathered(tail, *args, **kwargs):
     return _plots(RunResult(tail.columns, data, tail.meta, tail.status, tail.message), *args, **kwargs)
 
 
-JOBS = {"plots": _plots, "resample": _resample, "gather": _gather, "plots_gathered": _plots_gathered}
+def _plots_resampled(run, out, coarse, **kwargs):
+    """``plots`` with the ideal counterpart ``coarse`` (its own sample times) resampled here onto ``run``'s times:
+    ``record.resample`` column by column, so the columns sent are the numbers the command's resampling made."""
+    from mechanism.cosim.record import resample
+    return _plots(run, out, None if coarse is None else resample(coarse, run["time"]), **kwargs)
+
+
+JOBS = {"plots": _plots, "resample": _resample, "gather": _gather, "plots_gathered": _plots_gathered,
+        "plots_resampled": _plots_resampled}
 
 
 @dataclass(frozen=True)
