@@ -7,6 +7,7 @@ an interrupt) never sees a truncated file; ``output_lock`` keeps a second run ou
 from __future__ import annotations
 
 import contextlib
+import copy
 import csv
 import json
 import math
@@ -71,6 +72,9 @@ def summary(r: RunResult) -> dict:
     result["life"] = run_life(r)     # bearing rating life (docs/bearing-life.md); None for other joints
     half = 0.5 * float(r.meta.get("output_interval_s") or 0.0) + 1e-12   # the step count is rounded
     if period and t[-1] >= 2 * period - half:
+        if streamed is not None and streamed.rev2 is not None:
+            result["rev2"] = copy.deepcopy(streamed.rev2)
+            return result
         window = r if streamed is None else streamed.window   # (a streamed run kept the rows of this window)
         t = window["time"]
         # the samples with period - half <= t <= 2 period + half (the times rise): a slice, so views
@@ -78,6 +82,8 @@ def summary(r: RunResult) -> dict:
                      int(np.searchsorted(t, 2 * period + half, side="right")))
         result["rev2"] = _figures(window, rev2)
         result["rev2"]["life"] = run_life(window, (period, 2 * period))
+        if streamed is not None:   # the window's figures kept, its rows let go
+            streamed.rev2, streamed.window = copy.deepcopy(result["rev2"]), None
     return result
 
 

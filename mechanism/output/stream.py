@@ -26,7 +26,7 @@ import numpy as np
 from ..cosim.record import ENERGY_LAST, RunResult, energy_figures, unit_of
 
 #: bytes of gathered columns held before they go to the output worker (``TableStream``'s ``gather``)
-GATHER_BYTES = 2_000_000
+GATHER_BYTES = 1_000_000
 
 
 @dataclass
@@ -42,6 +42,8 @@ class Streamed:
     #: a resampled ideal counterpart's table at its own sample times (``results.DRAWN_WITH_IDEAL``): the figures
     #: resample it where they are drawn (``workers._plots_resampled``) instead of the command keeping those columns
     source: RunResult | None = None
+    #: the second revolution's figures once ``results.summary`` made them (``window`` is then let go)
+    rev2: dict | None = None
 
     @property
     def ball_load_columns(self) -> list[str]:
