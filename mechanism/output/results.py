@@ -249,13 +249,13 @@ def start_run_plots(result: RunResult, out: Path, workers) -> tuple | None:
     from mechanism.output.workers import ColumnsOf
     stream = result.streamed.stream if result.streamed is not None else None
     if workers is None or len(result["time"]) <= 1:
-        if stream is not None and stream.gather_names:
+        if stream is not None and stream.gathers(0):
             _read_back(result)
         return None
     remove_previous(out, FIGURES)
-    if stream is not None and stream.gather_names:   # the columns went to the worker during the run: the rest now
-        names = stream.gather_names
-        tail = stream.tail()
+    if stream is not None and stream.gathers(0):   # the columns went to the worker during the run: the rest now
+        names = stream.gathers(0)
+        tail = stream.tail(0)
         if tail is None or not workers.submit(0, "plots_gathered", ColumnsOf(tail, names), Path(out), None,
                                               names=RUN_ONLY):
             _read_back(result)
@@ -278,6 +278,9 @@ def _read_back(result: RunResult) -> None:
     """A streamed run whose gathered columns are not with a worker (it died): the columns it lacks read back from its
     complete timeseries.csv (its own kept columns stay as they are), so that it can be drawn here."""
     stream = result.streamed.stream
+    if stream.read_back:
+        return
+    stream.read_back = True
     back = read_csv(stream.path if stream.committed else stream.tmp)
     data = np.empty((len(result.data), len(back.columns)))
     for k, name in enumerate(back.columns):
@@ -293,6 +296,11 @@ def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult
     with ``plots`` (all the PNG files written)."""
     from mechanism.output.workers import ColumnsOf
     k, fallback = drawing
+    stream = result.streamed.stream if result.streamed is not None else None
+    if stream is not None and stream.gathers(1):   # the run's columns of these figures went to the second worker
+        return _finish_gathered(figures, result, out, ideal, workers, drawing, plots)
+    if stream is not None and stream.lost:   # some went to a worker that could not take them: read back
+        _read_back(result)
     # two workers: the second takes REST[0] at once, the first REST[1] after its run-only figures (about equal
     # ends); one worker: all of them after its run-only figures, once the tables are written
     shares = (REST[0], REST[1]) if len(workers) > 1 else (REST[0] + REST[1],)
@@ -325,6 +333,49 @@ def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult
     if rest:   # no worker could take them: drawn here
         from mechanism.output.plots import plot_run
         drawn += plot_run(result, out, _ideal_here(ideal, result), names=tuple(rest))
+    order = {name: n for n, name in enumerate(FIGURES)}
+    figures["plots"] = [str(p) for p in sorted(drawn, key=lambda path: order[Path(path).name])]
+    return figures
+
+
+def _finish_gathered(figures: dict, result: RunResult, out: Path, ideal: RunResult | None, workers,
+                     drawing: tuple, plots: bool) -> dict:
+    """``finish_outputs`` of a run whose columns of the figures with the ideal curve went to the second worker during
+    the run (``stream.for_run``, a long run): that worker draws all of them (the rows not yet sent go with the job)
+    while the first finishes the figures of the run alone and the tables are written. If it cannot take the job
+    (or dies) the columns are read back from timeseries.csv and the figures drawn here."""
+    from mechanism.output.workers import ColumnsOf
+    k, fallback = drawing
+    stream = result.streamed.stream
+    names = tuple(name for name in FIGURES if name in REST[0] + REST[1]) if plots else ()
+    tail = stream.tail(1)
+    job, ideal_sent = _ideal_sent(ideal)
+    submitted = bool(names) and tail is not None and workers.submit(
+        1, "plots_gathered", ColumnsOf(tail, tail.columns), out, ideal_sent, names=names,
+        coarse=job == "plots_resampled")
+    del tail
+    drawn, errors = [], []
+
+    def whole() -> RunResult:   # the run with every column (read back), should the worker die
+        _read_back(result)
+        return result
+
+    def collect(j: int, *args, **kwargs) -> None:
+        try:
+            drawn.extend(workers.result(j, "plots", *args, **kwargs))
+        except BaseException as err:   # noqa: BLE001 - raised below, once the tables are written
+            errors.append(err)
+    try:
+        figures = write_ideal_tables(figures, result, out, ideal)
+    finally:   # the workers' files are complete before anything else happens
+        collect(k, fallback, out, None, names=RUN_ONLY)
+        if submitted:
+            collect(1, ColumnsOf(whole, ()), out, ColumnsOf(lambda: _ideal_here(ideal, whole()), ()), names=names)
+    if errors:
+        raise errors[0]
+    if names and not submitted:   # no worker could take them: drawn here
+        from mechanism.output.plots import plot_run
+        drawn += plot_run(whole(), out, _ideal_here(ideal, result), names=names)
     order = {name: n for n, name in enumerate(FIGURES)}
     figures["plots"] = [str(p) for p in sorted(drawn, key=lambda path: order[Path(path).name])]
     return figures

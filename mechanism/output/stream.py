@@ -30,6 +30,16 @@ GATHER_BYTES = 1_000_000
 
 
 @dataclass
+class _Target:
+    """Columns gathered to an output worker: their names and indexes, and the rows not yet sent (column-major)."""
+
+    names: tuple[str, ...]
+    index: list[int]
+    pending: np.ndarray | None
+    held: int = 0
+
+
+@dataclass
 class Streamed:
     """What ``results.summary`` needs of a streamed run's whole table (``RunResult.streamed``)."""
 
@@ -57,9 +67,10 @@ class TableStream:
     ``keep_prefix``...); ``period``: the crank
     period [s], whose second revolution is kept (all columns) within ``margin`` [s] (at least two sample
     intervals); ``life``: the bearing's ``BearingParameters`` to accumulate the whole run's life from the recorded
-    ball loads (for a component without life outputs). ``gather``: ``(workers, select)``, the columns ``select``
-    picks of the table's (those the figures of the run alone read, ``results.run_only_columns``) go to the first output worker ``GATHER_BYTES`` at
-    a time instead of staying here (``results.start_run_plots`` sends the rest with the job; ``gathered``, ``lost``).
+    ball loads (for a component without life outputs). ``gather``: ``(workers, {k: select})``, the columns
+    ``select`` picks of the table's go to output worker ``k`` ``GATHER_BYTES`` at a time instead of staying here
+    (the figures drawn there read them: ``results.start_run_plots``, ``finish_outputs``, which send the rows not yet
+    sent, ``tail``, with the job); ``lost`` if a worker could not take them (they are read back from the file then).
     Use as a context manager: the temporary file is removed if it was not committed."""
 
     def __init__(self, path: Path, keep: tuple[str, ...], period: float | None = None, margin: float = 0.0,
@@ -68,10 +79,10 @@ class TableStream:
         self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")    # atomic_open's name
         self.keep, self.period, self.margin, self.life_params = tuple(keep), period, margin, life
         self.keep_prefix = keep_prefix
-        self.workers, self._select = gather if gather is not None else (None, lambda columns: ())
-        self.gather_names: tuple[str, ...] = ()
-        self.gathered = 0          # rows the worker holds
-        self.lost = False          # the worker could not take a block: the gathered columns are to be read back
+        self.workers, self._select = gather if gather is not None else (None, {})
+        self._targets: dict[int, _Target] = {}
+        self.lost = False          # a worker could not take a block: the gathered columns are to be read back
+        self.read_back = False     # (``results._read_back`` done)
         self.meta: dict = {}
         self.file = None
         self.error: OSError | None = None
@@ -103,12 +114,11 @@ class TableStream:
             if all(n in self.index for n in names):   # (else nothing is added, as in life_from_samples)
                 self._life_cols = [self.index[n] for n in names]
         self._life_t: float | None = None
-        self.gather_names = tuple(self._select(self.columns))
-        self._gather_index = [self.index[c] for c in self.gather_names]
-        self._pending = None       # the gathered columns' rows not yet sent (column-major)
-        self._held = 0
-        if self.workers is not None and self._gather_index:
-            self._pending = np.empty((len(self._gather_index), max(1, GATHER_BYTES // (8 * len(self._gather_index)))))
+        for k, select in self._select.items():
+            names = tuple(select(self.columns))
+            if names:
+                self._targets[k] = _Target(names, [self.index[c] for c in names],
+                                           np.empty((len(names), max(1, GATHER_BYTES // (8 * len(names))))))
         try:
             self.file = open(self.tmp, "w", newline="")   # noqa: SIM115 - open across writes; closed by _close
             csv.writer(self.file).writerow([f"{c} [{unit_of(c)}]" for c in self.columns])
@@ -129,40 +139,46 @@ class TableStream:
             self._table = np.concatenate([self._table, np.empty_like(self._table)])
         self._table[self.rows:self.rows + n] = block[:, self._kept_index]
         self.rows += n
-        if self._pending is not None:
-            self._hold(block)
+        for k, target in self._targets.items():
+            if target.pending is not None:
+                self._hold(k, target, block)
         self._accumulate(block)
 
-    def _hold(self, block: np.ndarray) -> None:
-        """The gathered columns of ``block`` into the pending buffer, which goes to the worker when full."""
-        pending, k = self._pending, 0
-        while k < len(block) and self._pending is not None:
-            n = min(len(block) - k, pending.shape[1] - self._held)
-            pending[:, self._held:self._held + n] = block[k:k + n, self._gather_index].T
-            self._held += n
-            k += n
-            if self._held == pending.shape[1]:
-                self._send()
+    def gathers(self, k: int) -> tuple[str, ...]:
+        """The columns that go to worker ``k`` (none: ())."""
+        target = self._targets.get(k)
+        return () if target is None else target.names
 
-    def _send(self) -> None:
-        """The pending rows to the worker (``OutputWorkers.gather``); if it cannot take them, gathering stops
-        (``lost``: ``results.start_run_plots`` reads those columns back from the file)."""
+    def _hold(self, k: int, target: _Target, block: np.ndarray) -> None:
+        """The gathered columns of ``block`` into worker ``k``'s pending buffer, sent when full."""
+        j = 0
+        while j < len(block) and target.pending is not None:
+            n = min(len(block) - j, target.pending.shape[1] - target.held)
+            target.pending[:, target.held:target.held + n] = block[j:j + n, target.index].T
+            target.held += n
+            j += n
+            if target.held == target.pending.shape[1]:
+                self._send(k, target)
+
+    def _send(self, k: int, target: _Target) -> None:
+        """The pending rows to worker ``k`` (``OutputWorkers.gather``); if it cannot take them, the gathering stops
+        (``lost``: the columns are read back from the file, ``results._read_back``)."""
         from .workers import ColumnsOf
-        part = RunResult(list(self.gather_names), self._pending[:, :self._held].T)
-        if self.workers.gather(0, ColumnsOf(part, self.gather_names)):
-            self.gathered += self._held
-            self._held = 0
+        part = RunResult(list(target.names), target.pending[:, :target.held].T)
+        if self.workers.gather(k, ColumnsOf(part, target.names)):
+            target.held = 0
         else:
             self.lost = True
-            self._pending = None
+            target.pending = None
 
-    def tail(self) -> RunResult | None:
-        """The gathered columns' rows not yet sent (with the run's meta, status and message), handed over once:
-        None if the gathering was lost."""
-        if self._pending is None:
+    def tail(self, k: int) -> RunResult | None:
+        """Worker ``k``'s gathered columns' rows not yet sent (with the run's meta, status and message), handed
+        over once: None if there are none to hand over (no gathering to ``k``, or lost)."""
+        target = self._targets.get(k)
+        if target is None or target.pending is None:
             return None
-        data, self._pending = self._pending[:, :self._held].T, None
-        return RunResult(list(self.gather_names), data, self.meta, self.status, self.message)
+        data, target.pending = target.pending[:, :target.held].T, None
+        return RunResult(list(target.names), data, self.meta, self.status, self.message)
 
     def result(self, meta: dict, status: str, message: str) -> RunResult:
         """The run's ``RunResult``: the kept columns, and the whole table's figures in ``streamed``; the file is
@@ -292,14 +308,26 @@ def for_run(out: Path, config, plots: bool, workers=None, ideal: bool = True) ->
     the columns summary.json compares with the ideal counterpart and, with ``plots``, those the figures draw, and the
     second revolution's rows (within two sample intervals and two steps). With plots, output ``workers`` and an
     ``ideal`` counterpart to come (``results.start_run_plots``), the columns only the figures of the run alone read
-    go to the first worker during the run (``gather``): those of the figures with the ideal curve stay."""
+    go to the first worker during the run (``gather``); with two workers and more than ``GATHER_BYTES`` of them, those
+    of the figures with the ideal curve go to the second (which then draws all of those: ``finish_outputs``), else
+    they stay."""
     from .results import COMPARED, DRAWN_WITH_IDEAL, PLOTTED, run_only_columns
     gather = plots and ideal and workers is not None and len(workers) > 0
-    keep = COMPARED + (DRAWN_WITH_IDEAL if gather else PLOTTED if plots else ())
+    rows = config.revs * config.crank_period / max(config.output_interval, config.step)
+    second = gather and len(workers) > 1 and rows * len(DRAWN_WITH_IDEAL) * 8 > GATHER_BYTES
+    keep = COMPARED + (() if second else DRAWN_WITH_IDEAL if gather else PLOTTED if plots else ())
+    targets = {0: run_only_columns} if gather else {}
+    if second:
+        targets[1] = _drawn_with_ideal
     return TableStream(Path(out) / "timeseries.csv", keep, config.crank_period,
                        2.0 * (config.output_interval + config.step),
                        keep_prefix="ball_load_" if plots and not gather else None,
-                       gather=(workers, run_only_columns) if gather else None)
+                       gather=(workers, targets) if gather else None)
+
+
+def _drawn_with_ideal(columns: list[str]) -> tuple[str, ...]:
+    from .results import DRAWN_WITH_IDEAL
+    return tuple(c for c in columns if c in DRAWN_WITH_IDEAL)
 
 
 def for_ideal(out: Path, config, plots: bool, workers=None) -> TableStream:

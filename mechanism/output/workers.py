@@ -74,12 +74,16 @@ def _gather(part) -> int:
     return sum(len(d) for d in _GATHERED)
 
 
-def _plots_gathered(tail, *args, **kwargs):
-    """``plots`` of the run whose rows were gathered, ``tail`` (a RunResult: the last rows, the run's meta) after them."""
+def _plots_gathered(tail, out, ideal=None, coarse: bool = False, **kwargs):
+    """``plots`` of the run whose rows were gathered, ``tail`` (a RunResult: the last rows, the run's meta) after them;
+    ``coarse``: ``ideal`` is at its own sample times (resampled here, as ``_plots_resampled``)."""
     from mechanism.cosim.record import RunResult
     data = np.concatenate([*_GATHERED, tail.data]) if _GATHERED else tail.data
     _GATHERED.clear()
-    return _plots(RunResult(tail.columns, data, tail.meta, tail.status, tail.message), *args, **kwargs)
+    run = RunResult(tail.columns, data, tail.meta, tail.status, tail.message)
+    if coarse:
+        return _plots_resampled(run, out, ideal, **kwargs)
+    return _plots(run, out, ideal, **kwargs)
 
 
 def _plots_resampled(run, out, coarse, **kwargs):
