@@ -366,3 +366,71 @@ def test_a_run_failing_midway_keeps_the_streamed_rows(tmp_path, monkeypatch):
     assert got["status"] == "failed" and got["samples"] == len(held.data)
     assert got["all"] == json.loads(json.dumps(summary(held)["all"]))
     assert not list((tmp_path / "cli").glob(".*.tmp"))
+
+
+@pytest.mark.parametrize("n", [1, 2])
+def test_the_command_gathering_columns_in_its_workers_writes_what_write_outputs_writes(tmp_path, monkeypatch, n):
+    """With 20 kB gathered at a time (``stream.GATHER_BYTES``) a 0.2-revolution run sends its columns of the
+    run-only figures to the first worker in blocks during the run and (two workers) those of the figures with the
+    ideal curve to the second, and keeps neither: every file, PNGs too, is what ``write_outputs`` writes in-process
+    from the run and its ideal counterpart held whole."""
+    from mechanism.cli import ideal_counterpart, main
+    from mechanism.output import stream, workers
+    from mechanism.output.results import write_outputs
+    from mechanism.run import RunConfig, run
+    monkeypatch.setenv("MECHANISM_OUTPUT_WORKERS", str(n))
+    monkeypatch.setattr(stream, "GATHER_BYTES", 20_000)
+    # (an earlier run in this process left tqdm's monitor thread, with which no worker would be forked)
+    monkeypatch.setattr(workers.threading, "active_count", lambda: 1)
+    sinks = []
+    monkeypatch.setattr(stream, "for_run", lambda *a, f=stream.for_run, **k: sinks.append(f(*a, **k)) or sinks[-1])
+    assert main(["run", "--revs", "0.2", "--mode", "inprocess", "--quiet", "--out", str(tmp_path / "cli")]) == 0
+    assert bool(sinks[0].gathers(1)) == (n == 2) and sinks[0].gathers(0) and not sinks[0].lost
+    config = RunConfig(revs=0.2, mode="inprocess", progress=False)
+    result = run(config)
+    held = write_outputs(result, tmp_path / "held", ideal_counterpart(config, result))
+    names = sorted(p.name for p in (tmp_path / "held").iterdir() if not p.name.startswith("."))
+    assert len(held["plots"]) == 7
+    assert names == sorted(p.name for p in (tmp_path / "cli").iterdir() if not p.name.startswith("."))
+    for name in names:
+        assert (tmp_path / "cli" / name).read_bytes() == (tmp_path / "held" / name).read_bytes(), name
+
+
+@pytest.mark.parametrize("dies", ["during the run", "after the run"])
+def test_columns_gathered_by_a_worker_that_died_are_read_back(tmp_path, monkeypatch, dies):
+    """The second worker, holding the run's columns of the figures with the ideal curve, killed (during the run:
+    a block it cannot take; after it: the job it cannot take): those figures are drawn here from the columns read
+    back from timeseries.csv (and the tables are the streamed bytes)."""
+    import os
+    import signal
+
+    from mechanism.cli import ideal_counterpart
+    from mechanism.output import stream, workers
+    from mechanism.output.figures import FIGURES
+    from mechanism.output.results import (
+        DRAWN_WITH_IDEAL,
+        compared_columns,
+        finish_outputs,
+        start_run_plots,
+        write_run_table,
+    )
+    from mechanism.run import RunConfig, run
+    monkeypatch.setattr(stream, "GATHER_BYTES", 20_000)
+    config = RunConfig(revs=0.2, mode="inprocess", progress=False)
+    with workers.OutputWorkers(2) as w, stream.for_run(tmp_path, config, True, w) as sink, \
+            stream.for_ideal(tmp_path, config, True, w) as ideal_sink:
+        if dies == "during the run":
+            os.kill(w._procs[1].pid, signal.SIGKILL)
+            w._procs[1].join(5)
+        result = run(config, sink)
+        assert sink.gathers(1) and sink.lost == (dies == "during the run")
+        if dies == "after the run":
+            os.kill(w._procs[1].pid, signal.SIGKILL)
+            w._procs[1].join(5)
+        drawing = start_run_plots(result, tmp_path, w)
+        early = write_run_table(result, tmp_path)
+        kept = compared_columns(result, DRAWN_WITH_IDEAL)
+        figures = finish_outputs(early, kept, tmp_path, ideal_counterpart(config, kept, w, ideal_sink), w, drawing)
+    assert [os.path.basename(p) for p in figures["plots"]] == list(FIGURES)
+    assert all((tmp_path / name).stat().st_size > 0 for name in FIGURES)
+    assert not list(tmp_path.glob(".*.tmp"))
