@@ -286,9 +286,15 @@ def _run(config: RunConfig, sink=None) -> RunResult:
 
 
 def _life_outputs(endpoint) -> bool:
-    """True if ``endpoint`` gives the bearing's life outputs (which the master keeps at the end of the run)."""
-    outputs = getattr(endpoint, "life_outputs", None)
-    return outputs is not None and bool(outputs())
+    """True if ``endpoint`` will give the bearing's life outputs at the end of the run (the master keeps them): an FMU
+    that has the life variables (``fmu_bearing.life.LIFE_NAMES``), or the in-process endpoint."""
+    if getattr(endpoint, "life_outputs", None) is None:
+        return False
+    variables = getattr(endpoint, "variables", None)
+    if variables is None:   # the in-process endpoint: its own accumulator
+        return True
+    from fmu_bearing.life import LIFE_NAMES
+    return any(name in variables for name in LIFE_NAMES)
 
 
 def run_adaptive(config, tol: float, initial_step: float | None = None, **settings) -> RunResult:
