@@ -434,3 +434,20 @@ def test_columns_gathered_by_a_worker_that_died_are_read_back(tmp_path, monkeypa
     assert [os.path.basename(p) for p in figures["plots"]] == list(FIGURES)
     assert all((tmp_path / name).stat().st_size > 0 for name in FIGURES)
     assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_only_a_component_without_life_variables_has_its_life_accumulated_from_the_stream(ball_bearing_fmu,
+                                                                                          journal_clearance_fmu):
+    """A streamed run accumulates the whole run's life from the recorded ball loads (~4 µs a sample) only when the
+    component gives no life outputs at the end: not for the in-process law or the BallBearing FMU (asked before it
+    is instantiated), as for a component without the life variables."""
+    from fmu_bearing.parameters import from_values
+    from mechanism.cosim.endpoints import InProcessEndpoint, fmu_endpoint
+    from mechanism.run import _life_outputs
+    assert _life_outputs(InProcessEndpoint(from_values({})))
+    bearing, clearance = fmu_endpoint(ball_bearing_fmu), fmu_endpoint(journal_clearance_fmu)
+    try:
+        assert _life_outputs(bearing) and not _life_outputs(clearance)
+    finally:
+        bearing.close()
+        clearance.close()
