@@ -10,6 +10,8 @@ these figures (``Streamed``); ``results.write_run_table`` renames the file onto 
 the in-memory table was written before, so the files are the same bytes as ``results.write_csv``'s and in the same
 order (a failed or interrupted run's file holds the rows up to then). A write error (a full disk) stops the
 writing and removes the file; the run goes on and ``commit`` raises the error (summary.json reports it, as before).
+With plots, the columns only the figures read can go to the output workers during the run instead of staying in
+the command (``gather``, ``for_run``); the ideal counterpart is resampled into a stream of its own (``for_ideal``).
 """
 from __future__ import annotations
 
@@ -63,10 +65,9 @@ class Streamed:
 class TableStream:
     """A ``Recorder`` sink writing ``path`` (timeseries.csv) as the rows arrive; see the module docstring.
 
-    ``keep``: the columns kept in memory at full resolution (those of the table's that exist; also those named
-    ``keep_prefix``...); ``period``: the crank
-    period [s], whose second revolution is kept (all columns) within ``margin`` [s] (at least two sample
-    intervals); ``life``: the bearing's ``BearingParameters`` to accumulate the whole run's life from the recorded
+    ``keep``: the columns kept in memory at full resolution (those of the table's that exist, and those whose names
+    start with ``keep_prefix``); ``period``: the crank period [s], whose second revolution is kept (all columns)
+    within ``margin`` [s] (at least two sample intervals) until the summary has its figures; ``life``: the bearing's ``BearingParameters`` to accumulate the whole run's life from the recorded
     ball loads (for a component without life outputs). ``gather``: ``(workers, {k: select})``, the columns
     ``select`` picks of the table's go to output worker ``k`` ``GATHER_BYTES`` at a time instead of staying here
     (the figures drawn there read them: ``results.start_run_plots``, ``finish_outputs``, which send the rows not yet
