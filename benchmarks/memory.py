@@ -57,6 +57,30 @@ lets it go (it keeps the 7 columns the other figures read, 5.9 MB) before the id
 plots (224 -> 214 MB: the peak is now the run's own, 206.5 MB, and the 5.9 MB copy kept); the workers no longer
 import scipy.interpolate (~20 MB each). Every file (PNGs, CSVs, summary.json) of a 20-revolution run is the
 same bytes as before.
+
+Streamed (issue 11, 07:30 UTC 2026-11-26, ``python benchmarks/memory.py --revs 2 20 [--plots --each]`` here and with
+``--root`` a checkout of d8ee290; the 40-revolution row ``--revs 40``; /usr/bin/time -v agrees within 1 MB):
+
+                          without plots: before (d8ee290)   after      with plots: before   after
+    2 revolutions             186.7 MB                      186.5 MB               186.9 MB   186.7 MB
+    20 revolutions            211.4 MB                      194.0 MB               214.9 MB   195.6 MB
+    40 revolutions                                          204.1 MB
+    growth per revolution      1.38 MB                       0.42 MB                1.55 MB    0.50 MB
+    its output workers (20)                                                        106.3 MB   103.5 MB
+
+Where it went: the run's table is never whole. ``record.Recorder`` with a sink (``output.stream.TableStream``) holds
+``record.STREAM_ROWS`` rows and hands them on as the compiled loop's chunks fill them: they are appended to
+timeseries.csv (a temporary name, renamed where the table was written before), the summary's peaks, energy figures
+and (a component without life outputs) life are accumulated, the second revolution's rows are kept until the
+summary has their figures, and only the columns the command still needs stay: those summary.json compares with the
+ideal counterpart (3 of 35) and, with plots, none more on a long run (the columns of the figures of the run alone go
+to the first output worker during the run, 1 MB at a time, those of the figures with the ideal curve to the second);
+the ideal counterpart is resampled straight into ideal_timeseries.csv in blocks (the spline keeps its knot slopes,
+not the 4x larger coefficients; the workers resample the columns they draw themselves). ``--phases 20 --plots``: the
+run 189.5 MB (was 206.5), the peak is now the ideal counterpart's resample, 195.7 MB. What still grows (~0.45 MB
+per revolution) is the ideal counterpart's: its own table at 1e-4 s, its slopes and the compared columns of both
+(summary.json's RMS deviation is a pairwise sum over the whole columns). Every file (CSVs, summary.json, PNGs) of
+the 2- and 20-revolution runs is the same bytes as before (``cmp``).
 """
 from __future__ import annotations
 

@@ -97,6 +97,7 @@ PHASES: dict[str, float] = {}
 
 def cmd_run(args) -> int:
     start = time.perf_counter()
+    from mechanism.output import stream
     from mechanism.output.results import (
         COMPARED,
         DRAWN_WITH_IDEAL,
@@ -114,9 +115,13 @@ def cmd_run(args) -> int:
     check_output_folder(out)
     config = config_from_ssp_args(args) if args.ssp else config_from_args(args)
     PHASES.clear()
-    with output_lock(out), output_workers(not args.no_plots) as workers:
+    # the streams' files are removed unless they were completed (renamed onto timeseries.csv, ideal_timeseries.csv)
+    with output_lock(out), output_workers(not args.no_plots) as workers, \
+            stream.for_run(out, config, not args.no_plots, workers, config.joint != "ideal" and not args.no_ideal) \
+            as sink, \
+            stream.for_ideal(out, config, not args.no_plots, workers) as ideal_sink:
         marks = [start, time.perf_counter()]
-        result = run(config)
+        result = run(config, sink)     # timeseries.csv written as the samples are recorded (renamed when complete)
         marks.append(time.perf_counter())
         stopped = interrupted()
         wants_ideal = not stopped and config.joint != "ideal" and not args.no_ideal
@@ -134,7 +139,8 @@ def cmd_run(args) -> int:
         written = time.perf_counter() - marks[-1]
         ideal = None
         if wants_ideal and not stopped:
-            ideal = ideal_counterpart(config, result, workers)
+            # resampled onto the run's times straight into ideal_timeseries.csv (its table never whole in memory)
+            ideal = ideal_counterpart(config, result, workers, ideal_sink)
             stopped = interrupted()
         marks.append(time.perf_counter())
         with stop_on_signals():   # a signal while writing waits until the files are complete
@@ -182,13 +188,15 @@ def output_workers(plots: bool):
         yield started
 
 
-def ideal_counterpart(config: RunConfig, result, workers=None):
+def ideal_counterpart(config: RunConfig, result, workers=None, sink=None):
     """The ideal joint's run for comparison, at the cheapest step that keeps its documented agreement
     (``IDEAL_STEP``: RK4 at 1e-4 s matches 1e-5 s to < 1e-9, mechanism.studies.reproduce.cases), resampled
     by cubic splines onto the bearing run's sample times when those are finer (error < 1e-9 relative
     for these smooth signals; measured in tests/test_kernels.py; ``record.resample``, scipy's spline without
     importing scipy.interpolate). ``workers``: the resampling runs in the first output worker when it is idle (the
-    same function, the same numbers); the command resamples itself while that worker draws the run's figures."""
+    same function, the same numbers); the command resamples itself while that worker draws the run's figures.
+    ``sink`` (``mechanism.output.stream.TableStream``): the resampled rows go to it, here (the result is its); when
+    there is nothing to resample, it is not used."""
     from dataclasses import replace
 
     from mechanism.cosim.record import resample
@@ -198,6 +206,9 @@ def ideal_counterpart(config: RunConfig, result, workers=None):
     ideal = run(replace(config, joint="ideal", mode="cosim", settings={}, balls=None, step=step, record_every=None,
                         output_interval=max(step, config.output_interval)))
     if ideal.ok and len(ideal.data) > 1 and ideal.meta.get("output_interval_s") != result.meta.get("output_interval_s"):
+        if sink is not None:
+            from mechanism.output.stream import resample_ideal
+            return resample_ideal(ideal, result["time"], sink)
         ideal = workers.call(0, "resample", ideal, result["time"]) if workers else resample(ideal, result["time"])
     return ideal
 

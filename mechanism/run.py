@@ -231,16 +231,18 @@ def interrupted() -> str | None:
     return _Stop.signal
 
 
-def run(config: RunConfig) -> RunResult:
+def run(config: RunConfig, sink=None) -> RunResult:
     """Run the slider-crank as configured and return the recorded samples (not yet written).
 
     SIGINT/SIGTERM during the run (main thread) end it with status "interrupted" and the samples so far.
+    ``sink``: a ``mechanism.output.stream.TableStream`` that writes the table as it is recorded (the result is then
+    its: some columns and the whole table's figures); the monolithic reference does not stream (its result is whole).
     """
     with stop_on_signals():
-        return _mark_interrupted(_run(config))
+        return _mark_interrupted(_run(config, sink))
 
 
-def _run(config: RunConfig) -> RunResult:
+def _run(config: RunConfig, sink=None) -> RunResult:
     params = SliderCrankParameters(rpm=config.rpm, gravity=config.gravity)
     model = build(params, "ideal" if config.joint == "ideal" else "bearing")
     system = System(model)
@@ -253,7 +255,8 @@ def _run(config: RunConfig) -> RunResult:
     settings = MasterSettings(t_end=t_end, step=config.step, output_interval=config.output_interval,
                               scheme=config.scheme, progress=config.progress, description=label)
     if config.joint == "ideal":
-        return run_master(system, q0, qd0, settings, observe, reaction_force=ideal_reaction(system), meta=meta)
+        return run_master(system, q0, qd0, settings, observe, reaction_force=ideal_reaction(system), meta=meta,
+                          sink=sink)
     link = BearingLink(system, model.bearings[0], config.contact_points)
     if config.mode == "monolithic":
         if config.joint != "bearing":
@@ -272,11 +275,26 @@ def _run(config: RunConfig) -> RunResult:
         path = fmu_path(config)
         endpoint = fmu_endpoint(path, config.component_settings, instance_name=config.joint)  # FMI 2 or 3
         meta["fmu"] = str(path)
+    if sink is not None and config.joint == "bearing" and not _life_outputs(endpoint):
+        # the summary's life then comes from the recorded ball loads, accumulated as they are streamed
+        sink.life_params = bearing_parameters(config.component_settings)
     try:
         return run_master(system, q0, qd0, settings, observe, link=link, endpoint=endpoint, meta=meta,
-                          energy=energy_account(config, system, link), contact_law=contact_law(config))
+                          energy=energy_account(config, system, link), contact_law=contact_law(config), sink=sink)
     finally:
         endpoint.close()
+
+
+def _life_outputs(endpoint) -> bool:
+    """True if ``endpoint`` will give the bearing's life outputs at the end of the run (the master keeps them): an FMU
+    that has the life variables (``fmu_bearing.life.LIFE_NAMES``), or the in-process endpoint."""
+    if getattr(endpoint, "life_outputs", None) is None:
+        return False
+    variables = getattr(endpoint, "variables", None)
+    if variables is None:   # the in-process endpoint: its own accumulator
+        return True
+    from fmu_bearing.life import LIFE_NAMES
+    return any(name in variables for name in LIFE_NAMES)
 
 
 def run_adaptive(config, tol: float, initial_step: float | None = None, **settings) -> RunResult:

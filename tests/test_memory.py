@@ -266,3 +266,188 @@ def test_a_table_written_first_leaves_no_earlier_run_beside_it(tmp_path):
             return True
     results.start_run_plots(run, tmp_path, Taker())
     assert sorted(p.name for p in tmp_path.iterdir()) == ["timeseries.csv"]
+
+
+# --------------------------------------------------------------------- the table streamed during the run
+def _synthetic_table(rng, rows: int, n_balls: int = 8) -> tuple[list[str], np.ndarray]:
+    """A table with the columns the summary reads (times rising at 1e-3 s, a crank period of 0.1 s)."""
+    from mechanism.cosim.record import BASE_COLUMNS, ENERGY_LAST
+    columns = list(BASE_COLUMNS) + [c for c in ENERGY_LAST if c not in BASE_COLUMNS] \
+        + [f"ball_load_{r + 1}" for r in range(n_balls)]
+    data = rng.normal(size=(rows, len(columns))) * 100.0
+    data[:, 0] = np.arange(rows) * 1e-3
+    loads = data[:, -n_balls:]
+    loads[loads < 0] = 0.0                        # unloaded balls
+    data[rng.random(rows) < 0.01, -1] = np.nan    # a ball load not recorded now and then
+    data[:, columns.index("omega_inner")] = 125.0 + rng.normal(size=rows)
+    data[:, columns.index("omega_outer")] = 0.0
+    return columns, data
+
+
+@pytest.mark.parametrize("rows", [1, 2, 150, 257, 333])
+def test_a_streamed_table_is_the_in_memory_writers_bytes_and_summary(tmp_path, monkeypatch, rows):
+    """A table recorded through a streaming ``Recorder`` (blocks of 37 rows): timeseries.csv is ``write_csv``'s bytes
+    and summary.json (peaks, energy, the second revolution's window and the whole run's and the window's life from
+    the ball loads) is the in-memory summary's, for runs shorter and longer than the second revolution."""
+    import json
+
+    from fmu_bearing.parameters import from_values
+    from mechanism.cosim import record
+    from mechanism.cosim.record import Recorder
+    from mechanism.output.results import summary, write_csv, write_json
+    from mechanism.output.stream import TableStream
+    monkeypatch.setattr(record, "STREAM_ROWS", 37)
+    columns, data = _synthetic_table(np.random.default_rng(rows), rows)
+    meta = {"config": {"joint": "bearing", "settings": {}, "balls": None}, "crank_period_s": 0.1,
+            "output_interval_s": 1e-3}
+    with TableStream(tmp_path / "s" / "timeseries.csv", ("time", "slider_a", "slider_x"), 0.1, 4e-3,
+                     life=from_values({})) as sink:
+        (tmp_path / "s").mkdir()
+        rec = Recorder(columns, rows + 2, sink)
+        for row in data:
+            rec.next_row()[:] = row
+        streamed = rec.result(meta, "completed", "")
+        sink.commit()
+    held = RunResult(columns, data, meta)
+    write_csv(held, tmp_path / "h" / "timeseries.csv")
+    assert (tmp_path / "s" / "timeseries.csv").read_bytes() == (tmp_path / "h" / "timeseries.csv").read_bytes()
+    assert streamed.columns == ["time", "slider_x", "slider_a"] and same_bits(streamed.data, data[:, [0, 8, 10]])
+    write_json(summary(streamed), tmp_path / "s.json")
+    write_json(summary(held), tmp_path / "h.json")
+    assert (tmp_path / "s.json").read_bytes() == (tmp_path / "h.json").read_bytes()
+    if rows >= 250:
+        assert json.loads((tmp_path / "s.json").read_text())["rev2"]["life"]["source"] == "recorded samples"
+    assert not list((tmp_path / "s").glob(".*.tmp"))
+
+
+def test_a_streamed_resample_is_resample(tmp_path, monkeypatch):
+    """``resample`` into a sink (blocks of 37 rows, lazy spline coefficients) writes the bytes of the resampled
+    table held whole, and keeps its columns to the bit."""
+    from mechanism.cosim import record
+    from mechanism.output.results import write_csv
+    from mechanism.output.stream import TableStream
+    monkeypatch.setattr(record, "STREAM_ROWS", 37)
+    columns, data = _synthetic_table(np.random.default_rng(7), 120)
+    t = data[:, 0]
+    for k in range(1, len(columns)):                   # smooth columns (splined) ...
+        data[:, k] = np.sin((k + 30) * 7.0 * t + k) * 10.0 ** (k % 7 - 3)
+    data[5, 4] = np.nan                                # ... one with a gap (linear)
+    data[:, 2] = np.nan                                # ... and one never recorded
+    coarse = RunResult(columns, data, {"m": 1})
+    times = np.arange(1200) * 1e-4
+    held = resample(coarse, times)
+    with TableStream(tmp_path / "s.csv", ("time", "slider_a", "slider_x"), 0.05, 1e-3) as sink:
+        streamed = resample(coarse, times, sink)
+        sink.commit()
+    write_csv(held, tmp_path / "h.csv")
+    assert (tmp_path / "s.csv").read_bytes() == (tmp_path / "h.csv").read_bytes()
+    assert streamed.meta == held.meta
+    assert same_bits(streamed["slider_a"], held["slider_a"]) and same_bits(streamed["slider_x"], held["slider_x"])
+
+
+def test_a_run_failing_midway_keeps_the_streamed_rows(tmp_path, monkeypatch):
+    """The command streams timeseries.csv (blocks of 16 rows): a run that diverges mid-way leaves the
+    rows up to the failure, the bytes ``write_csv`` writes of the same run held in memory, and a failed status."""
+    import json
+
+    from mechanism.cli import main
+    from mechanism.cosim import record
+    from mechanism.output.results import summary, write_csv
+    from mechanism.run import RunConfig, run
+    monkeypatch.setattr(record, "STREAM_ROWS", 16)
+    args = ["run", "--mode", "inprocess", "--revs", "0.5", "--step", "2e-5", "--scheme", "zoh",
+            "--quiet", "--no-plots", "--no-ideal", "--out", str(tmp_path / "cli")]
+    assert main(args) == 1
+    held = run(RunConfig(mode="inprocess", revs=0.5, step=2e-5, scheme="zoh", progress=False))
+    assert held.status == "failed" and 16 * 3 < len(held.data) < 1000
+    write_csv(held, tmp_path / "timeseries.csv")
+    assert (tmp_path / "cli" / "timeseries.csv").read_bytes() == (tmp_path / "timeseries.csv").read_bytes()
+    got = json.loads((tmp_path / "cli" / "summary.json").read_text())
+    assert got["status"] == "failed" and got["samples"] == len(held.data)
+    assert got["all"] == json.loads(json.dumps(summary(held)["all"]))
+    assert not list((tmp_path / "cli").glob(".*.tmp"))
+
+
+@pytest.mark.parametrize("n", [1, 2])
+def test_the_command_gathering_columns_in_its_workers_writes_what_write_outputs_writes(tmp_path, monkeypatch, n):
+    """With 20 kB gathered at a time (``stream.GATHER_BYTES``) a 0.2-revolution run sends its columns of the
+    run-only figures to the first worker in blocks during the run and (two workers) those of the figures with the
+    ideal curve to the second, and keeps neither: every file, PNGs too, is what ``write_outputs`` writes in-process
+    from the run and its ideal counterpart held whole."""
+    from mechanism.cli import ideal_counterpart, main
+    from mechanism.output import stream, workers
+    from mechanism.output.results import write_outputs
+    from mechanism.run import RunConfig, run
+    monkeypatch.setenv("MECHANISM_OUTPUT_WORKERS", str(n))
+    monkeypatch.setattr(stream, "GATHER_BYTES", 20_000)
+    # (an earlier run in this process left tqdm's monitor thread, with which no worker would be forked)
+    monkeypatch.setattr(workers.threading, "active_count", lambda: 1)
+    sinks = []
+    monkeypatch.setattr(stream, "for_run", lambda *a, f=stream.for_run, **k: sinks.append(f(*a, **k)) or sinks[-1])
+    assert main(["run", "--revs", "0.2", "--mode", "inprocess", "--quiet", "--out", str(tmp_path / "cli")]) == 0
+    assert bool(sinks[0].gathers(1)) == (n == 2) and sinks[0].gathers(0) and not sinks[0].lost
+    config = RunConfig(revs=0.2, mode="inprocess", progress=False)
+    result = run(config)
+    held = write_outputs(result, tmp_path / "held", ideal_counterpart(config, result))
+    names = sorted(p.name for p in (tmp_path / "held").iterdir() if not p.name.startswith("."))
+    assert len(held["plots"]) == 7
+    assert names == sorted(p.name for p in (tmp_path / "cli").iterdir() if not p.name.startswith("."))
+    for name in names:
+        assert (tmp_path / "cli" / name).read_bytes() == (tmp_path / "held" / name).read_bytes(), name
+
+
+@pytest.mark.parametrize("dies", ["during the run", "after the run"])
+def test_columns_gathered_by_a_worker_that_died_are_read_back(tmp_path, monkeypatch, dies):
+    """The second worker, holding the run's columns of the figures with the ideal curve, killed (during the run:
+    a block it cannot take; after it: the job it cannot take): those figures are drawn here from the columns read
+    back from timeseries.csv (and the tables are the streamed bytes)."""
+    import os
+    import signal
+
+    from mechanism.cli import ideal_counterpart
+    from mechanism.output import stream, workers
+    from mechanism.output.figures import FIGURES
+    from mechanism.output.results import (
+        DRAWN_WITH_IDEAL,
+        compared_columns,
+        finish_outputs,
+        start_run_plots,
+        write_run_table,
+    )
+    from mechanism.run import RunConfig, run
+    monkeypatch.setattr(stream, "GATHER_BYTES", 20_000)
+    config = RunConfig(revs=0.2, mode="inprocess", progress=False)
+    with workers.OutputWorkers(2) as w, stream.for_run(tmp_path, config, True, w) as sink, \
+            stream.for_ideal(tmp_path, config, True, w) as ideal_sink:
+        if dies == "during the run":
+            os.kill(w._procs[1].pid, signal.SIGKILL)
+            w._procs[1].join(5)
+        result = run(config, sink)
+        assert sink.gathers(1) and sink.lost == (dies == "during the run")
+        if dies == "after the run":
+            os.kill(w._procs[1].pid, signal.SIGKILL)
+            w._procs[1].join(5)
+        drawing = start_run_plots(result, tmp_path, w)
+        early = write_run_table(result, tmp_path)
+        kept = compared_columns(result, DRAWN_WITH_IDEAL)
+        figures = finish_outputs(early, kept, tmp_path, ideal_counterpart(config, kept, w, ideal_sink), w, drawing)
+    assert [os.path.basename(p) for p in figures["plots"]] == list(FIGURES)
+    assert all((tmp_path / name).stat().st_size > 0 for name in FIGURES)
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_only_a_component_without_life_variables_has_its_life_accumulated_from_the_stream(ball_bearing_fmu,
+                                                                                          journal_clearance_fmu):
+    """A streamed run accumulates the whole run's life from the recorded ball loads (~4 µs a sample) only when the
+    component gives no life outputs at the end: not for the in-process law or the BallBearing FMU (asked before it
+    is instantiated), as for a component without the life variables."""
+    from fmu_bearing.parameters import from_values
+    from mechanism.cosim.endpoints import InProcessEndpoint, fmu_endpoint
+    from mechanism.run import _life_outputs
+    assert _life_outputs(InProcessEndpoint(from_values({})))
+    bearing, clearance = fmu_endpoint(ball_bearing_fmu), fmu_endpoint(journal_clearance_fmu)
+    try:
+        assert _life_outputs(bearing) and not _life_outputs(clearance)
+    finally:
+        bearing.close()
+        clearance.close()

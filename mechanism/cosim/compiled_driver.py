@@ -257,8 +257,8 @@ class CompiledLoop:
         and the samples kept."""
         loop, rec = self.loop, self.rec
         every = max(1, self.every)    # rows this chunk may write: its multiples of every, and the run's end
-        if rec.rows + last // every - (first - 1) // every + 1 > len(rec.data):   # never with run_master's capacity
-            rec.data = np.vstack([rec.data, np.full_like(rec.data, np.nan)])
+        rec.reserve(last // every - (first - 1) // every + 1)   # (a streaming Recorder hands its rows on)
+        self.counts[8] = rec.rows
         y = cl.run_steps(y, first, last, self.h, self.every, loop._I, loop._R, loop._L, loop._LR, loop._W,
                          loop._u, loop._dy, loop._lam, self.p1, self.acc, self.stages, loop._probes,
                          loop._probe_scale, loop._react, rec.data, self.cols, self.P, self.cs, self.H,

@@ -585,7 +585,8 @@ def _same_jumps(a, b, tol: float = 1e-3) -> bool:
 def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: MasterSettings,
                observe: Observer, link: BearingLink | None = None, endpoint: Endpoint | None = None,
                reaction_force: Callable[[np.ndarray, np.ndarray], tuple[float, float]] | None = None,
-               meta: dict | None = None, energy: EnergyAccount | None = None, contact_law=None) -> RunResult:
+               meta: dict | None = None, energy: EnergyAccount | None = None, contact_law=None,
+               sink=None) -> RunResult:
     """Integrate the mechanism from (q0, qd0) to ``settings.t_end``, co-simulated with ``endpoint`` if given.
 
     ``energy``: an energy account (``mechanism.cosim.energy``) updated at every sample, adding its columns.
@@ -594,12 +595,15 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
 
     For the ideal joint pass ``link=endpoint=None`` and ``reaction_force(q, lam)`` giving the
     joint's force on the housing body, recorded as F_x, F_y.
+
+    ``sink``: the samples are handed to it as they are recorded (``record.Recorder``; e.g.
+    ``mechanism.output.stream.TableStream``, which writes timeseries.csv during the run) and the result is its.
     """
     h = settings.step
     n_steps = int(round(settings.t_end / h))
     every = max(1, int(round(settings.output_interval / h)))
     loop = CouplingLoop(system, settings, observe, link, endpoint, reaction_force, energy, contact_law)
-    rec = Recorder(loop.columns, n_steps // every + 2)
+    rec = Recorder(loop.columns, n_steps // every + 2, sink)
     info = dict(meta or {})
     info.update(step_s=h, output_interval_s=every * h, t_end_s=n_steps * h,
                 scheme=loop.scheme.name if loop.scheme else "none", endpoint=getattr(endpoint, "kind", "none"))
@@ -670,18 +674,18 @@ def finish(rec: Recorder, info: dict, status: str, message: str, endpoint, bar, 
     bar.close()
     info["substeps_max"] = loop.substeps_max
     info["substeps_total"] = loop.substeps_total
-    if loop.integrals is not None and status == "completed" and len(rec.table()) > 1:
+    if loop.integrals is not None and status == "completed" and rec.count > 1:
         # the energy residual's two parts [J]: the mechanism's (T - T_0 - W_drive - W_applied - W_link, the RK4
         # integration's error) and the interface's (W_link + V - V_0 + D - W_cage: the work of the bearing
         # force the mechanism felt against what the law stores and dissipates along the trajectory, i.e. the
         # energy the coupling created)
-        table = rec.table()
-        kinetic = table[:, rec.index["kinetic_energy"]]
+        first, last = rec.first_row, rec.last_row
+        kinetic = rec.index["kinetic_energy"]
         drive, applied, link_work = loop.integrals[1], loop.integrals[3], loop.integrals[4]
-        mechanism = float(kinetic[-1] - kinetic[0] - drive - applied - link_work)
+        mechanism = float(last[kinetic] - first[kinetic] - drive - applied - link_work)
         info["energy_interface_work_J"] = float(link_work)
         info["energy_residual_mechanism_J"] = mechanism
-        info["energy_residual_coupling_J"] = float(table[-1, rec.index["energy_residual"]]) - mechanism
+        info["energy_residual_coupling_J"] = float(last[rec.index["energy_residual"]]) - mechanism
     it = loop.iterations
     if it["steps"]:
         info.update(iteration_passes_mean=it["passes"] / it["steps"], iteration_passes_max=it["max_passes"],
@@ -690,4 +694,4 @@ def finish(rec: Recorder, info: dict, status: str, message: str, endpoint, bar, 
         info["component_calls"] = endpoint.calls
         if hasattr(endpoint, "life_outputs"):  # bearing rating life at the end (docs/bearing-life.md)
             info["life_outputs"] = endpoint.life_outputs()
-    return RunResult(rec.columns, rec.table(), info, status, message)
+    return rec.result(info, status, message)

@@ -79,7 +79,9 @@ def _slopes(x: np.ndarray, dx: np.ndarray, y: np.ndarray) -> np.ndarray:
 class NotAKnotSpline:
     """The not-a-knot cubic spline through (x, y): ``y`` of shape (n,) or (n, m), ``x`` strictly increasing."""
 
-    def __init__(self, x: np.ndarray, y: np.ndarray):
+    def __init__(self, x: np.ndarray, y: np.ndarray, lazy: bool = False):
+        """``lazy``: keep the knot slopes (n x m) and ``y`` (not copied) instead of the coefficients (4 x n x m), and
+        make each evaluated interval's coefficients when it is evaluated (the same operations: the same bits)."""
         x = np.asarray(x, dtype=float)
         y = np.asarray(y, dtype=float)
         self.vector = y.ndim == 1
@@ -97,6 +99,11 @@ class NotAKnotSpline:
             self.c = None
             return
         s = _slopes(x, dx, y2)
+        self._lazy = (y2, dx, s) if lazy else None
+        self.m = y2.shape[1]
+        if lazy:
+            self.c = None
+            return
         dxr = dx[:, None]
         slope = np.diff(y2, axis=0) / dxr          # CubicHermiteSpline's coefficients
         t = (s[:-1] + s[1:] - 2 * slope) / dxr
@@ -113,7 +120,7 @@ class NotAKnotSpline:
             xs = x_new[k:k + EVAL_CHUNK_ROWS]
             i = np.clip(np.searchsorted(self.x, xs, side="right") - 1, 0, last)   # PPoly's interval: x_i <= x < x_i+1
             s = (xs - self.x[i])[:, None]
-            c = self.c[:, i]
+            c = self.c[:, i] if self._lazy is None else self._coefficients(i)
             z = s                  # PPoly's power sum: 0 + c3 + c2 s + c1 s^2 + c0 s^3, powers by repeated products
             res = 0.0 + c[3]
             res += c[2] * z
@@ -124,8 +131,16 @@ class NotAKnotSpline:
             out[k:k + len(xs)] = res
         return out
 
+    def _coefficients(self, i: np.ndarray) -> np.ndarray:
+        """A lazy spline's coefficients of the intervals ``i`` (``__init__``'s operations on those rows)."""
+        y2, dx, s = self._lazy
+        dxr = dx[i][:, None]
+        slope = (y2[i + 1] - y2[i]) / dxr
+        t = (s[i] + s[i + 1] - 2 * slope) / dxr
+        return np.stack((t / dxr, (slope - s[i]) / dxr - t, s[i], y2[i]))
+
     def __call__(self, x_new: np.ndarray) -> np.ndarray:
         x_new = np.asarray(x_new, dtype=float)
-        out = np.empty((len(x_new), self.c.shape[2] if self.c is not None else self._scipy.c.shape[2]))
+        out = np.empty((len(x_new), self.m if self._scipy is None else self._scipy.c.shape[2]))
         self.evaluate_into(x_new, out)
         return out[:, 0] if self.vector else out

@@ -88,8 +88,12 @@ def run_life(result, window: tuple[float, float] | None = None) -> dict | None:
         if out is not None:
             return out
     params = run_parameters(result)
-    if params is None or not result.ball_load_columns or len(result["time"]) < 2:
+    streamed = result.streamed if window is None else None    # the whole of a streamed run: accumulated
+    loads = result.ball_load_columns if streamed is None else streamed.ball_load_columns
+    if params is None or not loads or len(result["time"]) < 2:
         return None
     t = result["time"]
     window = window or (float(t[0]), float(t[-1]))
+    if streamed is not None:   # (None if its component was expected to give life outputs and did not at the end)
+        return None if streamed.life is None else figures(streamed.life, "recorded samples", window)
     return figures(life_from_samples(result, params, *window), "recorded samples", window)

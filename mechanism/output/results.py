@@ -7,6 +7,7 @@ an interrupt) never sees a truncated file; ``output_lock`` keeps a second run ou
 from __future__ import annotations
 
 import contextlib
+import copy
 import csv
 import json
 import math
@@ -63,18 +64,26 @@ def summary(r: RunResult) -> dict:
     result = {"status": r.status, "message": r.message, "meta": r.meta, "samples": len(t)}
     if len(t) == 0:
         return result
-    result["all"] = _figures(r, slice(None))
+    streamed = r.streamed      # a streamed run: the whole table's figures were accumulated as it was recorded
+    result["all"] = _figures(r, slice(None)) if streamed is None else dict(streamed.figures)
     energy = energy_summary(r)
     if energy is not None:
         result["energy"] = energy
     result["life"] = run_life(r)     # bearing rating life (docs/bearing-life.md); None for other joints
     half = 0.5 * float(r.meta.get("output_interval_s") or 0.0) + 1e-12   # the step count is rounded
     if period and t[-1] >= 2 * period - half:
+        if streamed is not None and streamed.rev2 is not None:
+            result["rev2"] = copy.deepcopy(streamed.rev2)
+            return result
+        window = r if streamed is None else streamed.window   # (a streamed run kept the rows of this window)
+        t = window["time"]
         # the samples with period - half <= t <= 2 period + half (the times rise): a slice, so views
         rev2 = slice(int(np.searchsorted(t, period - half, side="left")),
                      int(np.searchsorted(t, 2 * period + half, side="right")))
-        result["rev2"] = _figures(r, rev2)
-        result["rev2"]["life"] = run_life(r, (period, 2 * period))
+        result["rev2"] = _figures(window, rev2)
+        result["rev2"]["life"] = run_life(window, (period, 2 * period))
+        if streamed is not None:   # the window's figures kept, its rows let go
+            streamed.rev2, streamed.window = copy.deepcopy(result["rev2"]), None
     return result
 
 
@@ -118,12 +127,17 @@ def output_lock(out: Path):
 CSV_CHUNK_ROWS = 256
 
 
+def csv_line(n: int) -> str:
+    """The format of a row of ``n`` numbers in timeseries.csv (csv.writer's row format and line end)."""
+    return ",".join(["%.10g"] * n) + "\r\n"
+
+
 def write_csv(r: RunResult, path: Path) -> None:
     """timeseries.csv: one header row 'name [unit]', then one row per sample (written atomically)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_open(path, "w", newline="") as f:
         csv.writer(f).writerow([f"{c} [{unit_of(c)}]" for c in r.columns])
-        line = ",".join(["%.10g"] * len(r.columns)) + "\r\n"     # csv.writer's row format and line end
+        line = csv_line(len(r.columns))
         for k in range(0, len(r.data), CSV_CHUNK_ROWS):   # a chunk at a time: no list of the whole file
             f.write("".join([line % row for row in map(tuple, r.data[k:k + CSV_CHUNK_ROWS].tolist())]))
 
@@ -171,16 +185,16 @@ def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, 
         from mechanism.output.workers import ColumnsOf
         from mechanism.output.workers import shares as shares_of
         run_sent = ColumnsOf(result, plotted_columns(result))     # only the plotted columns, as raw bytes
-        ideal_sent = None if ideal is None else ColumnsOf(ideal, plotted_columns(ideal))
+        job, ideal_sent = _ideal_sent(ideal)
         shares = [(k, names) for k, names in enumerate(shares_of(len(workers)))
-                  if workers.submit(k, "plots", run_sent, out, ideal_sent, names=names)]
+                  if workers.submit(k, job, run_sent, out, ideal_sent, names=names)]
     try:
         figures = _write_tables(result, out, ideal)
     finally:   # the workers' files are complete before anything else happens (an error is raised after)
         drawn = {}
         for k, names in shares:
             try:
-                drawn[names] = workers.result(k, "plots", result, out, ideal, names=names)
+                drawn[names] = workers.result(k, job, result, out, _ideal_source(ideal), names=names)
             except BaseException as err:   # noqa: BLE001 - raised below, after the other share is complete
                 drawn[names] = err
     plotted = []
@@ -192,7 +206,7 @@ def write_outputs(result: RunResult, out: Path, ideal: RunResult | None = None, 
         rest = tuple(name for name in FIGURES if not any(name in names for names in drawn))
         if rest:   # no worker (or one that could not take its share): drawn here
             from mechanism.output.plots import plot_run
-            plotted += plot_run(result, out, ideal, names=rest)
+            plotted += plot_run(result, out, _ideal_here(ideal, result), names=rest)
         order = {name: k for k, name in enumerate(FIGURES)}
         plotted.sort(key=lambda path: order[Path(path).name])
     figures["plots"] = [str(p) for p in plotted]   # returned only (summary.json is written before the plots)
@@ -221,17 +235,35 @@ REST = (("slider_acceleration.png", "joint_force.png"), ("crank_moment.png", "sl
 DRAWN_WITH_IDEAL = ("time", "crank_angle", "slider_a", "crank_moment", "F_x", "F_y", "slider_x")
 
 
+def run_only_columns(columns: list[str]) -> tuple[str, ...]:
+    """The columns of ``columns`` that only ``RUN_ONLY``'s figures read (with the crank angle and the time): a streamed
+    run hands them to the first output worker during the run (``stream.for_run``)."""
+    return tuple(c for c in columns if c in ("time", "crank_angle") or c.startswith("ball_load_")
+                 or (c in PLOTTED and c not in DRAWN_WITH_IDEAL))
+
+
 def start_run_plots(result: RunResult, out: Path, workers) -> tuple | None:
     """Hand the first output worker ``RUN_ONLY``'s figures of ``result`` (its plotted columns as raw bytes), so
     that the command can write the run's table and let it go before the ideal counterpart runs (issue 11);
     ``finish_outputs`` collects them. None if there is no worker to take them (then keep the whole table)."""
     from mechanism.output.workers import ColumnsOf
+    stream = result.streamed.stream if result.streamed is not None else None
     if workers is None or len(result["time"]) <= 1:
+        if stream is not None and stream.gathers(0):
+            _read_back(result)
         return None
     remove_previous(out, FIGURES)
-    names = plotted_columns(result)
-    if not workers.submit(0, "plots", ColumnsOf(result, names), Path(out), None, names=RUN_ONLY):
-        return None
+    if stream is not None and stream.gathers(0):   # the columns went to the worker during the run: the rest now
+        names = stream.gathers(0)
+        tail = stream.tail(0)
+        if tail is None or not workers.submit(0, "plots_gathered", ColumnsOf(tail, names), Path(out), None,
+                                              names=RUN_ONLY):
+            _read_back(result)
+            return None
+    else:
+        names = plotted_columns(result)
+        if not workers.submit(0, "plots", ColumnsOf(result, names), Path(out), None, names=RUN_ONLY):
+            return None
     # should the worker die, the figures are drawn in-process from timeseries.csv (written by then), with the
     # run's meta, status and message (the CSV has none: ball count and titles come from the meta)
     meta, status, message = result.meta, result.status, result.message
@@ -242,6 +274,20 @@ def start_run_plots(result: RunResult, out: Path, workers) -> tuple | None:
     return 0, ColumnsOf(reread, names)
 
 
+def _read_back(result: RunResult) -> None:
+    """A streamed run whose gathered columns are not with a worker (it died): the columns it lacks read back from its
+    complete timeseries.csv (its own kept columns stay as they are), so that it can be drawn here."""
+    stream = result.streamed.stream
+    if stream.read_back:
+        return
+    stream.read_back = True
+    back = read_csv(stream.path if stream.committed else stream.tmp)
+    data = np.empty((len(result.data), len(back.columns)))
+    for k, name in enumerate(back.columns):
+        data[:, k] = result[name] if result.has(name) else back[name]
+    result.columns, result.data = back.columns, data
+
+
 def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult | None, workers, drawing: tuple,
                    plots: bool = True) -> dict:
     """``write_outputs`` after ``start_run_plots`` and ``write_run_table``: the figures with the ideal curve
@@ -250,28 +296,33 @@ def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult
     with ``plots`` (all the PNG files written)."""
     from mechanism.output.workers import ColumnsOf
     k, fallback = drawing
+    stream = result.streamed.stream if result.streamed is not None else None
+    if stream is not None and stream.gathers(1):   # the run's columns of these figures went to the second worker
+        return _finish_gathered(figures, result, out, ideal, workers, drawing, plots)
+    if stream is not None and stream.lost:   # some went to a worker that could not take them: read back
+        _read_back(result)
     # two workers: the second takes REST[0] at once, the first REST[1] after its run-only figures (about equal
     # ends); one worker: all of them after its run-only figures, once the tables are written
     shares = (REST[0], REST[1]) if len(workers) > 1 else (REST[0] + REST[1],)
     shares = tuple(tuple(name for name in FIGURES if name in share) for share in shares) if plots else ()
     sent = ColumnsOf(result, tuple(c for c in result.columns if c in DRAWN_WITH_IDEAL))
-    ideal_sent = None if ideal is None else ColumnsOf(ideal, plotted_columns(ideal))
+    job, ideal_sent = _ideal_sent(ideal)
     drawn, errors = [], []
 
-    def collect(j: int, *args, **kwargs) -> None:
+    def collect(j: int, *args, job: str = job, **kwargs) -> None:
         try:
-            drawn.extend(workers.result(j, "plots", *args, **kwargs))
+            drawn.extend(workers.result(j, job, *args, **kwargs))
         except BaseException as err:   # noqa: BLE001 - raised below, once the tables are written
             errors.append(err)
 
     def submit(j: int, names: tuple[str, ...]) -> list:
-        return [(j, names)] if workers.submit(j, "plots", sent, out, ideal_sent, names=names) else []
+        return [(j, names)] if workers.submit(j, job, sent, out, ideal_sent, names=names) else []
 
     submitted = submit(1, shares[0]) if len(shares) > 1 else []
     try:
         figures = write_ideal_tables(figures, result, out, ideal)
     finally:   # the workers' files are complete before anything else happens
-        collect(k, fallback, out, None, names=RUN_ONLY)
+        collect(k, fallback, out, None, names=RUN_ONLY, job="plots")
     if not errors:   # the first worker's next share (sent now: it reads it at once, the command does not wait)
         submitted += [share for names in shares[len(submitted):] for share in submit(k, names)]
     for j, names in submitted:
@@ -281,10 +332,80 @@ def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult
     rest = [name for names in shares if not any(names == done for _, done in submitted) for name in names]
     if rest:   # no worker could take them: drawn here
         from mechanism.output.plots import plot_run
-        drawn += plot_run(result, out, ideal, names=tuple(rest))
+        drawn += plot_run(result, out, _ideal_here(ideal, result), names=tuple(rest))
     order = {name: n for n, name in enumerate(FIGURES)}
     figures["plots"] = [str(p) for p in sorted(drawn, key=lambda path: order[Path(path).name])]
     return figures
+
+
+def _finish_gathered(figures: dict, result: RunResult, out: Path, ideal: RunResult | None, workers,
+                     drawing: tuple, plots: bool) -> dict:
+    """``finish_outputs`` of a run whose columns of the figures with the ideal curve went to the second worker during
+    the run (``stream.for_run``, a long run): that worker draws all of them (the rows not yet sent go with the job)
+    while the first finishes the figures of the run alone and the tables are written. If it cannot take the job
+    (or dies) the columns are read back from timeseries.csv and the figures drawn here."""
+    from mechanism.output.workers import ColumnsOf
+    k, fallback = drawing
+    stream = result.streamed.stream
+    names = tuple(name for name in FIGURES if name in REST[0] + REST[1]) if plots else ()
+    tail = stream.tail(1)
+    job, ideal_sent = _ideal_sent(ideal)
+    submitted = bool(names) and tail is not None and workers.submit(
+        1, "plots_gathered", ColumnsOf(tail, tail.columns), out, ideal_sent, names=names,
+        coarse=job == "plots_resampled")
+    del tail
+    drawn, errors = [], []
+
+    def whole() -> RunResult:   # the run with every column (read back), should the worker die
+        _read_back(result)
+        return result
+
+    def collect(j: int, *args, **kwargs) -> None:
+        try:
+            drawn.extend(workers.result(j, "plots", *args, **kwargs))
+        except BaseException as err:   # noqa: BLE001 - raised below, once the tables are written
+            errors.append(err)
+    try:
+        figures = write_ideal_tables(figures, result, out, ideal)
+    finally:   # the workers' files are complete before anything else happens
+        collect(k, fallback, out, None, names=RUN_ONLY)
+        if submitted:
+            collect(1, ColumnsOf(whole, ()), out, ColumnsOf(lambda: _ideal_here(ideal, whole()), ()), names=names)
+    if errors:
+        raise errors[0]
+    if names and not submitted:   # no worker could take them: drawn here
+        from mechanism.output.plots import plot_run
+        drawn += plot_run(whole(), out, _ideal_here(ideal, result), names=names)
+    order = {name: n for n, name in enumerate(FIGURES)}
+    figures["plots"] = [str(p) for p in sorted(drawn, key=lambda path: order[Path(path).name])]
+    return figures
+
+
+def _ideal_source(ideal: RunResult | None) -> RunResult | None:
+    """The ideal counterpart's table the figures read: a streamed one's ``source`` (at its own sample times) if it has
+    one, else itself."""
+    source = ideal.streamed.source if ideal is not None and ideal.streamed is not None else None
+    return ideal if source is None else source
+
+
+def _ideal_sent(ideal: RunResult | None) -> tuple:
+    """The workers' job for figures with the ideal curve and the ideal's columns to send: ``plots_resampled`` with
+    ``Streamed.source`` (resampled there) or ``plots`` with the ideal's plotted columns."""
+    from mechanism.output.workers import ColumnsOf
+    source = _ideal_source(ideal)
+    if source is None:
+        return "plots", None
+    job = "plots" if source is ideal else "plots_resampled"
+    return job, ColumnsOf(source, plotted_columns(source))
+
+
+def _ideal_here(ideal: RunResult | None, result: RunResult) -> RunResult | None:
+    """The ideal counterpart for figures drawn in this process: a streamed one's ``source`` resampled again."""
+    source = _ideal_source(ideal)
+    if source is ideal or source is None:
+        return ideal
+    from mechanism.cosim.record import resample
+    return resample(source, result["time"])
 
 
 def _write_tables(result: RunResult, out: Path, ideal: RunResult | None) -> dict:
@@ -322,8 +443,8 @@ COMPARED = ("time", "slider_a", "slider_x")
 def compared_columns(result: RunResult, keep: tuple[str, ...] = COMPARED) -> RunResult:
     """``result`` reduced to the columns ``keep`` (default those ``write_ideal_tables`` compares, ``COMPARED``;
     ``result`` itself when it already is)."""
-    if tuple(result.columns) == keep:
-        return result
+    if tuple(result.columns) == keep or set(result.columns) == {c for c in keep if result.has(c)}:
+        return result   # (it has those columns only: in another order, a copy would be all it made)
     names = [c for c in keep if result.has(c)]
     data = np.empty((len(result.data), len(names)))
     for k, name in enumerate(names):
@@ -350,7 +471,10 @@ def _write_csv_or_report(r: RunResult, path: Path, figures: dict, out: Path) -> 
     """``write_csv``; on an OSError (a full disk) summary.json with ``write_error`` (the small summary at least
     is kept), then the error is raised."""
     try:
-        write_csv(r, path)
+        if r.streamed is not None:   # written as it was recorded: renamed onto timeseries.csv now
+            r.streamed.stream.commit()
+        else:
+            write_csv(r, path)
     except OSError as err:
         figures["write_error"] = f"{err.strerror or err} writing {err.filename or out}"
         with contextlib.suppress(OSError):

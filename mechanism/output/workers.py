@@ -63,7 +63,38 @@ def _resample(*args):
     return resample(*args)
 
 
-JOBS = {"plots": _plots, "resample": _resample}
+#: the blocks of a streamed run's columns received so far by ``gather`` (in a worker)
+_GATHERED: list = []
+
+
+def _gather(part) -> int:
+    """Keep ``part`` (a RunResult of a streamed run's columns, ``stream.TableStream``) for ``plots_gathered``;
+    the rows gathered so far."""
+    _GATHERED.append(part.data)
+    return sum(len(d) for d in _GATHERED)
+
+
+def _plots_gathered(tail, out, ideal=None, coarse: bool = False, **kwargs):
+    """``plots`` of the run whose rows were gathered, ``tail`` (a RunResult: the last rows, the run's meta) after them;
+    ``coarse``: ``ideal`` is at its own sample times (resampled here, as ``_plots_resampled``)."""
+    from mechanism.cosim.record import RunResult
+    data = np.concatenate([*_GATHERED, tail.data]) if _GATHERED else tail.data
+    _GATHERED.clear()
+    run = RunResult(tail.columns, data, tail.meta, tail.status, tail.message)
+    if coarse:
+        return _plots_resampled(run, out, ideal, **kwargs)
+    return _plots(run, out, ideal, **kwargs)
+
+
+def _plots_resampled(run, out, coarse, **kwargs):
+    """``plots`` with the ideal counterpart ``coarse`` (its own sample times) resampled here onto ``run``'s times:
+    ``record.resample`` column by column, so the columns sent are the numbers the command's resampling made."""
+    from mechanism.cosim.record import resample
+    return _plots(run, out, None if coarse is None else resample(coarse, run["time"]), **kwargs)
+
+
+JOBS = {"plots": _plots, "resample": _resample, "gather": _gather, "plots_gathered": _plots_gathered,
+        "plots_resampled": _plots_resampled}
 
 
 @dataclass(frozen=True)
@@ -278,6 +309,20 @@ class OutputWorkers:
         if status == "error":
             raise value
         return value
+
+    def gather(self, k: int, part: ColumnsOf) -> bool:
+        """Hand worker ``k`` a block of a streamed run's columns to keep (``_gather``), waiting for its receipt;
+        False if it is not there or failed (nothing runs in-process: the caller reads the rows back instead)."""
+        if not self.submit(k, "gather", part):
+            return False
+        try:
+            status, _ = self._conns[k].recv()
+        except (EOFError, OSError):
+            self._lost(k)
+            return False
+        finally:
+            self._busy[k] = False
+        return status == "ok"
 
     def call(self, k: int, job: str, *args, **kwargs):
         """``job(*args, **kwargs)`` in worker ``k`` (in-process if it is not there)."""
