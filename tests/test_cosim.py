@@ -57,7 +57,7 @@ def test_default_scheme_meets_the_1_percent_target_through_the_fmu(reference_2re
     for key in ("peak_joint_force_N", "max_eccentricity_m", "max_ball_load_N"):
         assert abs(got[key] / ref[key] - 1.0) < 0.01, (key, got[key], ref[key])
     assert got["max_constraint_violation_m"] < 1e-9
-    # the default (jacobian-implicit) repeats a step until it converges or a further pass is predicted to change
+    # the default (law-model, iterated like jacobian-implicit) repeats a step until it converges or a further pass is predicted to change
     # it by less than the tolerance (iterate_where_needed): passes counted, one component call each
     assert r.meta["component_calls"] == round(r.meta["iteration_passes_mean"] * 10000)
     assert 1.0 < r.meta["iteration_passes_mean"] < 3.0 and r.meta["iteration_predicted"] > 0

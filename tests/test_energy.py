@@ -134,7 +134,7 @@ def test_stage_integrals_match_the_law_at_one_state():
 
 
 def _master(t_end: float, **settings):
-    """The default scheme through the master with the energy account, in-process, 1200 rpm."""
+    """The default scheme (law-model) through the master with the energy account, in-process, 1200 rpm."""
     from mechanism.cosim.endpoints import InProcessEndpoint
     from mechanism.cosim.energy import EnergyAccount
     from mechanism.cosim.joint import BearingLink
@@ -162,7 +162,10 @@ def test_cosimulation_account_is_the_motion_the_mechanism_went_through():
     trajectory error), where the sampled account was 8 mJ off over the start-up (docs/coupling.md)."""
     a, b = (_master(0.005, kernels=k) for k in (True, False))
     for col in ("damping_dissipation", "drive_work", "cage_work", "energy_residual"):
-        scale = max(1e-12, float(np.max(np.abs(a[col]))))
+        # the residual is a balance of terms the size of the drive work (with law-model, the default, it is
+        # 1e-5 of them): its rounding is relative to those terms, not to itself
+        magnitude = a["drive_work"] if col == "energy_residual" else a[col]
+        scale = max(1e-12, float(np.max(np.abs(magnitude))))
         assert np.max(np.abs(a[col] - b[col])) <= 1e-8 * scale, col
     drive = float(a["drive_work"][-1])
     assert abs(a.meta["energy_residual_mechanism_J"]) <= 1e-7 * drive
@@ -175,7 +178,9 @@ def test_cosimulation_account_is_the_motion_the_mechanism_went_through():
 def test_adaptive_account_rolls_back_with_its_steps():
     """The adaptive driver rejects and repeats steps: the integrals are rolled back with them, so its account
     closes on the mechanism side and its residual is small against the dissipation (tol 1e-4, 0.05 rev)."""
-    r = run_adaptive(RunConfig(mode="inprocess", revs=0.05, progress=False, settings=DAMPING), 1e-4)
+    # jacobian-implicit inside: law-model (the default) rarely gives the controller a step to reject at this tol
+    r = run_adaptive(RunConfig(mode="inprocess", revs=0.05, progress=False, settings=DAMPING,
+                               scheme="jacobian-implicit"), 1e-4)
     assert r.ok, r.message
     assert r.meta["rejected_steps"] > 0
     e = energy_summary(r)

@@ -35,6 +35,9 @@ def reference():
 
 
 def test_law_model_is_second_order(reference):
+    """The default scheme's order (issue 12 item 5): law-model is the default (DEFAULT_SCHEME)."""
+    from mechanism.cosim.coupling import DEFAULT_SCHEME
+    assert DEFAULT_SCHEME == "law-model"
     t_ref = np.asarray(reference["time"])
     F_ref = np.hypot(reference["F_x"], reference["F_y"])
     rev2 = t_ref >= REV - 1e-12

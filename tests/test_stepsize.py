@@ -56,7 +56,7 @@ def test_zero_order_hold_converges_at_first_order(tmp_path, cache, ball_bearing_
     assert order == pytest.approx(1.0, abs=0.3)
 
 
-def test_default_scheme_reaches_its_measured_order(tmp_path, cache, ball_bearing_fmu):
+def test_jacobian_drift_reaches_its_measured_order(tmp_path, cache, ball_bearing_fmu):
     """jacobian-drift, 6.25e-7 .. 1e-5 s. Its measured order is about 1.2, not 2 (docs/stepsize-study.md:
     a ball entering the load zone switches its damping force on discontinuously, and the FMU integrates
     the cage angle with held ring speeds, both O(h)); it must stay stable and under 1 % at 1e-5 s."""

@@ -29,7 +29,7 @@ is reached exactly (samples need no interpolation, H <= output_interval) and the
 rarely: the default scheme's drift term d_n is estimated over the previous step and extrapolated
 over the next one, which favours piecewise-constant steps.
 
-The coupling inside is the run's scheme (``settings.scheme``, default ``jacobian-implicit``,
+The coupling inside is the run's scheme (``settings.scheme``, default ``law-model``,
 ``mechanism.cosim.coupling``); each step is ``master.CouplingLoop.communicate``, the same code the
 fixed-step master runs (an iterative scheme repeats each of the three steps with its own rollback).
 

@@ -19,7 +19,7 @@ A failure (an error status from the component, a non-finite state, constraints d
 beyond ``max_constraint_violation``) stops the run with a message naming the step, the
 time and the cause; the samples recorded so far are kept and the component is always freed.
 
-An iterative scheme (``jacobian-implicit``, the default) repeats steps 2-3 with rollback until the
+An iterative scheme (``law-model``, the default, or ``jacobian-implicit``) repeats steps 2-3 with rollback until the
 end-of-step exchange converges (``CouplingLoop.communicate``; the component's state is restored by
 its get/set FMU state). An energy account (``mechanism.cosim.energy``), if given, adds its columns
 to every sample.

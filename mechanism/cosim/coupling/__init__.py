@@ -63,7 +63,9 @@ SCHEMES: dict[str, type[Scheme]] = {cls.name: cls for cls in (
     InterfaceJacobianDrift, InterfaceJacobian, InterfaceJacobianSecant, InterfaceJacobianImplicit,
     ZeroOrderHold, ZeroOrderHoldJacobi, LinearExtrapolation,
     QuadraticExtrapolation, LawModel)}
-DEFAULT_SCHEME = InterfaceJacobianImplicit.name
+#: the default scheme (docs/coupling.md, "The default scheme"): third order in the step, stable and within 1 %
+#: at 1e-4 s; without a known law (the journal-clearance component) it is jacobian-implicit
+DEFAULT_SCHEME = LawModel.name
 
 
 def make_scheme(name: str) -> Scheme:

@@ -103,8 +103,9 @@ def register(subparsers) -> None:
                    help=f"communication steps [s]: lo:hi:count log-spaced, or a comma list (default {DEFAULT_STEPS}); "
                         "snapped to the output grid")
     p.add_argument("--tols", default=DEFAULT_TOLS, help=f"tolerances of the adaptive scheme (default {DEFAULT_TOLS})")
-    p.add_argument("--schemes", default="jacobian-implicit,jacobian-drift,jacobian,extrap1,zoh",
-                   help="'all' (every scheme and adaptive) or a comma list (default jacobian-implicit,jacobian-drift,jacobian,extrap1,zoh)")
+    p.add_argument("--schemes", default="law-model,jacobian-implicit,jacobian-drift,jacobian,extrap1,zoh",
+                   help="'all' (every scheme and adaptive) or a comma list "
+                        "(default law-model,jacobian-implicit,jacobian-drift,jacobian,extrap1,zoh)")
     p.add_argument("--revs", type=float, default=2.0,
                    help="revolutions per run (default 2; errors over the second revolution)")
     p.add_argument("--mode", choices=("cosim", "inprocess"), default="cosim",

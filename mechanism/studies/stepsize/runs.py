@@ -16,6 +16,7 @@ from mechanism.output.results import write_rows
 from mechanism.studies.parallel import requested_workers
 from mechanism.studies.stepsize.cases import (
     ADAPTIVE,
+    ADAPTIVE_SCHEME,
     COLUMN_NAMES,
     COLUMNS,
     DIVERGENT,
@@ -79,7 +80,7 @@ def case_job(case: dict) -> dict:
                            settings=dict(case["settings"]), fmu=case["fmu"], progress=False)
         if case["scheme"] == ADAPTIVE:
             from mechanism.run import run_adaptive
-            result = run_adaptive(config, case["tol"], h_max=case["output_interval"])
+            result = run_adaptive(replace(config, scheme=ADAPTIVE_SCHEME), case["tol"], h_max=case["output_interval"])
         else:
             result = run(replace(config, scheme=case["scheme"]))
         row["wall_time"] = time.perf_counter() - wall0
