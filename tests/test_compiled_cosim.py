@@ -100,7 +100,9 @@ def states(monkeypatch) -> StateWatch:
 
 
 def _cosim(fmu, **kw) -> RunConfig:
-    return RunConfig(**{"mode": "cosim", "fmu": str(fmu), "progress": False, "step": 1e-5, **kw})
+    """A co-simulation config; jacobian-implicit unless given: these tests hold the native exchange to fmpy's bit for
+    bit (law-model, the default, has its own: tests/test_law_model_coupling.py::test_law_model_through_the_fmu)."""
+    return RunConfig(**{"mode": "cosim", "scheme": "jacobian-implicit", "fmu": str(fmu), "progress": False, "step": 1e-5, **kw})
 
 
 def test_default_run_through_the_fmu(ball_bearing_fmu, states, monkeypatch):

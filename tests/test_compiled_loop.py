@@ -34,6 +34,9 @@ from mechanism.systems.slider_crank import (
 )
 
 RTOL = 1e-9
+#: the scheme of the tests that hold the compiled loop's mechanics (chunks, energy account, failures, the end
+#: sample) to the Python loop's pointwise; law-model (the default) has its own tests below
+IMPLICIT = "jacobian-implicit"
 
 
 def _run(config: RunConfig, compiled: bool, monkeypatch) -> tuple:
@@ -79,7 +82,7 @@ def _compare(config: RunConfig, monkeypatch):
 
 def test_default_run_with_the_energy_account(monkeypatch):
     """1200 rpm, 8 balls, C = 50 N s/m, 0.1 rev: samples, counters, life outputs and energy meta agree."""
-    ref, _ = _compare(RunConfig(mode="inprocess", rpm=1200, revs=0.1, step=1e-5, progress=False,
+    ref, _ = _compare(RunConfig(scheme=IMPLICIT, mode="inprocess", rpm=1200, revs=0.1, step=1e-5, progress=False,
                                 settings={"damping_model": 1, "damping_coefficient": 50}), monkeypatch)
     assert ref.has("energy_residual") and "energy_residual_coupling_J" in ref.meta   # mechanism.run's account
     assert ref.meta["iteration_passes_max"] >= 2 and ref.meta["iteration_predicted"] > 0
@@ -88,21 +91,21 @@ def test_default_run_with_the_energy_account(monkeypatch):
 
 def test_twenty_balls_undamped_every_third_step(monkeypatch):
     """300 rpm, 20 (overlapping) balls, no damping, a sample every 3rd step."""
-    ref, _ = _compare(RunConfig(mode="inprocess", rpm=300, revs=0.05, step=1e-5, balls=20, record_every=3, progress=False,
+    ref, _ = _compare(RunConfig(scheme=IMPLICIT, mode="inprocess", rpm=300, revs=0.05, step=1e-5, balls=20, record_every=3, progress=False,
                                 settings={"allow_ball_overlap": True, "damping_model": 0}), monkeypatch)
     assert ref.has("ball_load_20") and len(ref["time"]) == 1 + 1000 // 3 + 1   # and the end, off the stride
 
 
 def test_oil_film_and_substeps(monkeypatch):
     """The oil-film damping (eq. 29-32: no onset jumps) and several RK4 substeps per step."""
-    ref, _ = _compare(RunConfig(mode="inprocess", rpm=1200, revs=0.03, progress=False,
+    ref, _ = _compare(RunConfig(scheme=IMPLICIT, mode="inprocess", rpm=1200, revs=0.03, progress=False,
                                 settings={"damping_model": 2}), monkeypatch)
     assert ref.meta["substeps_max"] > 1
 
 
 def test_large_step_not_converged(monkeypatch):
     """A step of 1e-4 s: substeps, max_iterations reached (not converged) on many steps."""
-    ref, _ = _compare(RunConfig(mode="inprocess", rpm=1200, revs=0.05, step=1e-4, progress=False), monkeypatch)
+    ref, _ = _compare(RunConfig(scheme=IMPLICIT, mode="inprocess", rpm=1200, revs=0.05, step=1e-4, progress=False), monkeypatch)
     assert ref.meta["iteration_not_converged"] > 0
 
 
@@ -118,7 +121,7 @@ def test_explicit_schemes(scheme, monkeypatch):
 @pytest.mark.parametrize("settings, step", [({"eccentricity_limit": 1.5e-5}, 1e-5), ({}, 4e-4)])
 def test_failure_is_reported_alike(settings, step, monkeypatch):
     """A run stopped by the component (|e| beyond the limit): the same step, time, cause and kept rows."""
-    ref, new = _compare(RunConfig(mode="inprocess", rpm=1200, revs=0.1, step=step, settings=settings,
+    ref, new = _compare(RunConfig(scheme=IMPLICIT, mode="inprocess", rpm=1200, revs=0.1, step=step, settings=settings,
                                   progress=False), monkeypatch)
     assert ref.status == "failed" and "eccentricity" in ref.meta["failure"]["cause"]
     assert new.meta["failure"] == ref.meta["failure"]
@@ -127,13 +130,13 @@ def test_failure_is_reported_alike(settings, step, monkeypatch):
 def test_other_paths_run_the_python_loop(monkeypatch):
     """The law not compiled, or the kernels off, fall back to the Python loop."""
     monkeypatch.setattr(run_module, "InProcessEndpoint", functools.partial(InProcessEndpoint, compiled=False))
-    result, chunks = _run(RunConfig(mode="inprocess", rpm=1200, revs=0.01, progress=False), True, monkeypatch)
+    result, chunks = _run(RunConfig(scheme=IMPLICIT, mode="inprocess", rpm=1200, revs=0.01, progress=False), True, monkeypatch)
     assert result.ok and chunks == 0
     monkeypatch.setattr(compiled_driver.CompiledLoop, "__init__", None)    # would fail if used
     settings = functools.partial(MasterSettings, kernels=False)
     with monkeypatch.context() as m:
         m.setattr(run_module, "MasterSettings", settings)
-        assert run(RunConfig(mode="inprocess", rpm=1200, revs=0.005, progress=False)).ok
+        assert run(RunConfig(scheme=IMPLICIT, mode="inprocess", rpm=1200, revs=0.005, progress=False)).ok
 
 
 def test_life_add_matches_the_accumulator():
@@ -189,7 +192,7 @@ def test_without_energy_account(with_law, options):
     results = []
     for compiled in (False, True):
         endpoint = InProcessEndpoint({"damping_model": 1, "damping_coefficient": 50.0})
-        settings = MasterSettings(t_end=0.02 * 60 / 1200, step=1e-5, progress=False, compiled_loop=compiled,
+        settings = MasterSettings(scheme=IMPLICIT, t_end=0.02 * 60 / 1200, step=1e-5, progress=False, compiled_loop=compiled,
                                   **options)
         results.append(run_master(system, q0, qd0, settings, slider_crank_observer(system),
                                   link=BearingLink(system, model.bearings[0]), endpoint=endpoint,
@@ -220,7 +223,7 @@ def test_the_poll_between_chunks_stops_the_run_alike():
     results = []
     for compiled in (False, True):
         endpoint = InProcessEndpoint({"damping_model": 1, "damping_coefficient": 50.0})
-        settings = MasterSettings(t_end=0.2 * 60 / 1200, step=1e-5, progress=False, compiled_loop=compiled)
+        settings = MasterSettings(scheme=IMPLICIT, t_end=0.2 * 60 / 1200, step=1e-5, progress=False, compiled_loop=compiled)
         results.append(run_master(system, q0, qd0, settings, observe, link=BearingLink(system, model.bearings[0]),
                                   endpoint=endpoint, contact_law=endpoint.bearing))
     ref, new = results
@@ -230,9 +233,9 @@ def test_the_poll_between_chunks_stops_the_run_alike():
 
 
 def test_the_runs_end_is_recorded_off_the_output_stride(monkeypatch):
-    """903 rpm, 0.1 rev at the default 5e-6 s, samples every 1e-5 s: 1329 steps, an odd count. Both loops record
+    """903 rpm, 0.1 rev at 5e-6 s, samples every 1e-5 s: 1329 steps, an odd count. Both loops record
     the end state (t_end_s) as the last sample, besides every 2nd step, and agree."""
-    ref, _ = _compare(RunConfig(mode="inprocess", rpm=903, revs=0.1, progress=False,
+    ref, _ = _compare(RunConfig(scheme=IMPLICIT, mode="inprocess", rpm=903, revs=0.1, step=5e-6, progress=False,
                                 settings={"damping_model": 1, "damping_coefficient": 50}), monkeypatch)
     n = round(0.1 * 60 / 903 / 5e-6)
     assert n % 2 == 1 and ref.meta["t_end_s"] == n * 5e-6
