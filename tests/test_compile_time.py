@@ -103,3 +103,21 @@ def test_the_run_waits_only_for_the_stages_its_step_needs(monkeypatch):
     assert process.poll() is not None and process.done == {"loop", "advance", "fmu"}
     monkeypatch.setattr(compiled_driver, "_variant", (False, True))     # in-process law-model: it would wait
     assert set(warmup.needed(False, True)) == {"loop", "advance", "in-process", "law-model"}
+
+
+@pytest.mark.parametrize("executable", [None, "", "/bin/sleep"])
+def test_the_warmup_is_started_with_a_python_interpreter(executable, monkeypatch):
+    """In a host that embeds Python, ``sys.executable`` may be None or the host's own program: the warm-up is then
+    started with the interpreter of ``sys.exec_prefix`` (or not at all), never with the host's program (which would
+    not compile anything, and the first run would wait for it) and never with an error escaping."""
+    from mechanism.cosim import compiled_driver
+    monkeypatch.setattr(sys, "executable", executable)
+    python = compiled_driver.python_executable()
+    assert python is None or (Path(python).name.startswith("python") and Path(python).is_file())
+    started = []
+    monkeypatch.setattr(compiled_driver.subprocess, "Popen", lambda args, **kw: started.append(args) or None)
+    monkeypatch.setattr(compiled_driver, "cached", lambda: False)
+    monkeypatch.setattr(compiled_driver, "collect_stages", lambda process: process)
+    monkeypatch.setenv("MECHANISM_COMPILE_WORKER", "1")
+    compiled_driver.start_warmup()
+    assert all(args[0] == python for args in started) and (python is None) == (not started)

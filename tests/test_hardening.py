@@ -338,3 +338,18 @@ def test_fmu_endpoints_share_one_extraction(ball_bearing_fmu):
         a.close()
         b.close()
     assert Path(a._unzipdir).is_dir()   # kept for the next endpoint; removed at exit
+
+
+def test_a_killed_runs_temporary_files_are_removed_by_the_next_run(tmp_path):
+    """A run killed while streaming its table (SIGKILL, the OOM killer) leaves ``.timeseries.csv.<pid>.tmp`` (and
+    perhaps a figure's ``.<name>.<pid>.tmp.png``): the next run to hold the folder's lock removes them, and
+    nothing else."""
+    out = tmp_path / "o"
+    out.mkdir()
+    stale = [out / ".timeseries.csv.99999.tmp", out / ".ideal_timeseries.csv.99999.tmp", out / ".joint_forces.99999.tmp.png"]
+    kept = [out / "timeseries.csv", out / "notes.tmp"]
+    for path in stale + kept:
+        path.write_text("x")
+    with output_lock(out):
+        assert not any(path.exists() for path in stale)
+        assert all(path.exists() for path in kept)

@@ -98,15 +98,34 @@ def start_warmup() -> subprocess.Popen | None:
         raise ValueError(f"MECHANISM_COMPILE_WORKER={wanted!r} must be 0 (no second process) or 1")
     if wanted == "0" or (os.cpu_count() or 1) < 2 or cached():
         return None
+    python = python_executable()
+    if python is None:
+        return None
     root = str(Path(__file__).resolve().parents[2])     # the folder holding the mechanism package imported here
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
-    try:
-        process = subprocess.Popen([sys.executable, "-m", "mechanism.cosim.warmup"], cwd=root, env=env,
+    try:    # its own session: a Ctrl-C at the terminal reaches the run, which ends the process itself
+        process = subprocess.Popen([python, "-m", "mechanism.cosim.warmup"], cwd=root, env=env,
                                    stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                                   text=True)
-    except OSError:
+                                   text=True, start_new_session=True)
+    except (OSError, TypeError, ValueError):
         return None
     return collect_stages(process)
+
+
+def python_executable() -> str | None:
+    """The Python interpreter for the warm-up process: ``sys.executable`` when it is one, else the interpreter
+    of ``sys.exec_prefix`` (in a host that embeds Python, ``sys.executable`` may be None or the host's own
+    program, which started with ``-m mechanism.cosim.warmup`` would never compile anything); None if neither is."""
+    version = f"{sys.version_info[0]}.{sys.version_info[1]}"
+    prefix = Path(sys.exec_prefix)
+    for candidate in (sys.executable, prefix / "bin" / f"python{version}", prefix / "bin" / "python3",
+                      prefix / "python.exe"):
+        if not candidate or not isinstance(candidate, (str, Path)):
+            continue
+        path = Path(candidate)
+        if path.name.lower().startswith("python") and path.is_file() and os.access(path, os.X_OK):
+            return str(path)
+    return None
 
 
 def collect_stages(process: subprocess.Popen) -> subprocess.Popen:

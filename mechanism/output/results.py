@@ -116,9 +116,20 @@ def output_lock(out: Path):
     try:
         os.ftruncate(fd, 0)
         os.write(fd, str(os.getpid()).encode())
+        _remove_stale_temporaries(out)
         yield out
     finally:
         os.close(fd)
+
+
+def _remove_stale_temporaries(out: Path) -> None:
+    """Remove the temporary files (``.<name>.<pid>.tmp``, atomic_open's and the streamed table's) a run killed in
+    this folder left behind: the folder's lock is held, so no other run is writing one."""
+    for stale in [*out.glob(".*.tmp"), *out.glob(".*.tmp.png")]:
+        try:
+            stale.unlink()
+        except OSError:
+            pass
 
 
 #: rows formatted and written at a time by ``write_csv``: a chunk's text (~100 kB at 33 columns) stays below
@@ -280,6 +291,8 @@ def _read_back(result: RunResult) -> None:
     stream = result.streamed.stream
     if stream.read_back:
         return
+    if stream.error is not None:   # the table could not be written (a full disk): its error, as at its commit
+        raise stream.error
     stream.read_back = True
     back = read_csv(stream.path if stream.committed else stream.tmp)
     data = np.empty((len(result.data), len(back.columns)))
