@@ -184,7 +184,7 @@ def _errors(r, ref) -> tuple[float, float]:
 
 def test_at_1e_4_s_the_error_is_the_substeps_not_the_step(reference_fifth, monkeypatch):
     """h = 1e-4 s over the start-up (0.2 revolution at 1200 rpm, impacts and contact onsets): the law-model's
-    error is its RK4 substeps' (it falls with ``resolution``), far below the default scheme's at the same step.
+    error is its RK4 substeps' (it falls with ``resolution``), far below jacobian-implicit's at the same step.
     Measured (onset correction of impulse and first moment, 2026-11-26): pointwise |F| 2.0e-2 and 8.6e-4 of the
     peak at resolution 1 and 8 (the default); cage angle 1.5e-6 and 7.7e-8 rad; jacobian-implicit at 1e-4 s: 0.41
     of the peak, 5.3e-5 rad."""
