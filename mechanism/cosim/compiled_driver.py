@@ -8,6 +8,7 @@ FMU, the law not compiled, the kernels off) the Python loop (the reference) runs
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import subprocess
@@ -21,6 +22,7 @@ import numpy as np
 from numba import types
 
 from fmu_bearing.ball_bearing import BearingInputError
+from mechanism import kernel_cache
 from mechanism.cosim import compiled_loop as cl
 from mechanism.cosim import component_call as cc
 from mechanism.cosim import component_kernel as ck
@@ -173,6 +175,45 @@ def finish_warmup(process: subprocess.Popen | None, timeout: float = 300.0,
             process.stdout.close()
 
 
+#: the run_steps variants (P None, LM None) this process has called (compiled or loaded from the cache)
+_called: set = set()
+
+
+@contextlib.contextmanager
+def _first_call_lock(variant: tuple[bool, bool]):
+    """Hold an exclusive lock on numba's cache folder around this process's first call of a ``run_steps`` variant.
+
+    ``run_steps`` has up to four compiled variants (FMU or in-process law, law-model or not). numba saves a new
+    one by reading the function's cache index, taking the first free data-file number and writing the index, then
+    the data, without a lock: two processes compiling different variants at once (two first runs after an install,
+    parallel test workers) could take the same number and later load each other's machine code. Serialising the
+    first call per process closes that; later calls take no lock. No lock where ``fcntl`` is missing (Windows)."""
+    if variant in _called:
+        yield
+        return
+    try:
+        import fcntl
+    except ImportError:     # pragma: no cover - Windows
+        fcntl = None
+    fd = None
+    if fcntl is not None:
+        try:
+            folder = Path(os.environ.get("NUMBA_CACHE_DIR") or kernel_cache.folder())
+            folder.mkdir(parents=True, exist_ok=True)
+            fd = os.open(folder / "run_steps.lock", os.O_RDWR | os.O_CREAT, 0o644)
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:     # a read-only cache folder: numba does not write there either
+            if fd is not None:
+                os.close(fd)
+            fd = None
+    try:
+        yield
+        _called.add(variant)
+    finally:
+        if fd is not None:
+            os.close(fd)     # releases the lock
+
+
 def eligible(loop) -> bool:
     """True if ``loop`` (a started ``CouplingLoop``) can run compiled (see the module docstring)."""
     scheme = loop.scheme
@@ -278,12 +319,13 @@ class CompiledLoop:
         every = max(1, self.every)    # rows this chunk may write: its multiples of every, and the run's end
         rec.reserve(last // every - (first - 1) // every + 1)   # (a streaming Recorder hands its rows on)
         self.counts[8] = rec.rows
-        y = cl.run_steps(y, first, last, self.h, self.every, loop._I, loop._R, loop._L, loop._LR, loop._W,
-                         loop._u, loop._dy, loop._lam, self.p1, self.acc, self.stages, loop._probes,
-                         loop._probe_scale, loop._react, rec.data, self.cols, self.P, self.cs, self.H,
-                         self.refs.inputs, self.refs.coupling, self.refs.real_samples, self.refs.int_samples,
-                         self.refs.bool_samples, self.PC, self.PE, self.past, self.xin, self.xf, self.integrals,
-                         self.counts, self.fset, self.iset, self.sent, self.fail, self.LM)
+        with _first_call_lock((self.P is None, self.LM is None)):
+            y = cl.run_steps(y, first, last, self.h, self.every, loop._I, loop._R, loop._L, loop._LR, loop._W,
+                             loop._u, loop._dy, loop._lam, self.p1, self.acc, self.stages, loop._probes,
+                             loop._probe_scale, loop._react, rec.data, self.cols, self.P, self.cs, self.H,
+                             self.refs.inputs, self.refs.coupling, self.refs.real_samples, self.refs.int_samples,
+                             self.refs.bool_samples, self.PC, self.PE, self.past, self.xin, self.xf, self.integrals,
+                             self.counts, self.fset, self.iset, self.sent, self.fail, self.LM)
         code = int(self.fail[0])
         if code == cl.OK:
             self.steps_done, self.t = last, last * self.h
