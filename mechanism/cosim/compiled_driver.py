@@ -22,7 +22,6 @@ import numpy as np
 from numba import types
 
 from fmu_bearing.ball_bearing import BearingInputError
-from mechanism import kernel_cache
 from mechanism.cosim import compiled_loop as cl
 from mechanism.cosim import component_call as cc
 from mechanism.cosim import component_kernel as ck
@@ -198,11 +197,12 @@ def _first_call_lock(variant: tuple[bool, bool]):
     fd = None
     if fcntl is not None:
         try:
-            folder = Path(os.environ.get("NUMBA_CACHE_DIR") or kernel_cache.folder())
+            import numba  # its cache folder: mechanism.kernel_cache's, set when mechanism was imported
+            folder = Path(numba.config.CACHE_DIR or os.environ["NUMBA_CACHE_DIR"])
             folder.mkdir(parents=True, exist_ok=True)
             fd = os.open(folder / "run_steps.lock", os.O_RDWR | os.O_CREAT, 0o644)
             fcntl.flock(fd, fcntl.LOCK_EX)
-        except OSError:     # a read-only cache folder: numba does not write there either
+        except (OSError, KeyError):     # no folder, or a read-only one: numba does not write there either
             if fd is not None:
                 os.close(fd)
             fd = None
