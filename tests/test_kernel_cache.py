@@ -34,14 +34,19 @@ def test_the_folder_under_the_users_cache_dir_and_inherited_unchanged(tmp_path):
 
 
 def test_numba_uses_the_folder():
+    """In a fresh process (not this one, whose numba config other tests' processes may have changed), importing
+    mechanism points numba at the folder keyed by the current sources, and a kernel's cache lives there."""
     import os
-
-    import numba
-
-    from mechanism.cosim import law_kernel
-    # numba's folder is one keyed by the sources (mechanism-<16 hex digits>). Not compared with key() recomputed
-    # now: on parallel test workers one worker once found a key other than the controller's (a nested folder; not
-    # explained yet, noted in the closing note of 2026-11-26)
-    name = os.path.basename(numba.config.CACHE_DIR)
-    assert name.startswith(kernel_cache.PREFIX) and len(name) == len(kernel_cache.PREFIX) + 16
-    assert law_kernel.evaluate._cache._cache_path.startswith(numba.config.CACHE_DIR)
+    import subprocess
+    import sys
+    code = ("import os, numba; from mechanism import kernel_cache; from mechanism.cosim import law_kernel; "
+            "print(numba.config.CACHE_DIR); print(os.environ['NUMBA_CACHE_DIR']); "
+            "print(kernel_cache.PREFIX + kernel_cache.key()); print(law_kernel.evaluate._cache._cache_path)")
+    root = kernel_cache.PACKAGE.parent
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["PYTHONPATH"] = str(root)
+    config, environ, name, path = subprocess.run([sys.executable, "-c", code], env=env, cwd=root, check=True,
+                                                 capture_output=True, text=True).stdout.split("\n")[:4]
+    assert config == environ and os.path.basename(config) == name
+    assert config == str(kernel_cache.PACKAGE / "__pycache__" / "numba" / name)
+    assert path.startswith(config)
