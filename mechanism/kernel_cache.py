@@ -46,15 +46,10 @@ def folder(environ: dict | None = None) -> Path:
     return (Path(given) if given else PACKAGE / "__pycache__" / "numba") / name
 
 
-#: the folder ``configure`` set (None before it ran)
-configured: Path | None = None
-
-
 def configure() -> Path:
     """Point numba's cache at ``folder()`` (the environment for numba's import and for child processes; numba's
     config too if it is imported already)."""
-    global configured
-    path = configured = folder()
+    path = folder()
     os.environ["NUMBA_CACHE_DIR"] = str(path)
     config = getattr(sys.modules.get("numba"), "config", None)
     if config is not None:

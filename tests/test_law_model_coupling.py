@@ -124,25 +124,34 @@ def _rk4_with_onset(theta: float, j: float, d: float, g0: float, g1: float, h: f
     return y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
+def _onset_implementations(name):
+    """``name`` of law_model (the reference) and of law_model_kernel (its numba twin, which the compiled loop calls)."""
+    from mechanism.cosim import law_model_kernel
+    from mechanism.cosim.coupling import law_model
+    return [getattr(law_model, name), getattr(law_model_kernel, name)]
+
+
+@pytest.mark.parametrize("which", [0, 1], ids=["python", "numba"])
 @pytest.mark.parametrize("theta", [0.05, 0.3, 0.49, 0.51, 0.8, 0.97])
-def test_onset_weights_make_rk4_exact_for_the_jump(theta):
+def test_onset_weights_make_rk4_exact_for_the_jump(theta, which):
     """A force switched on inside an RK4 step (eq. 18's damping jump, then growing): without the correction RK4's
     velocity and position are off by O(j h) and O(j h^2); with ``onset_weights``' g0 + g1 sigma both equal the
     exact integrals (closed form: v = j r + d r^2 / 2, x = j r^2 / 2 + d r^3 / 6, r = 1 - theta, h = 1)."""
-    from mechanism.cosim.coupling.law_model import onset_weights
+    onset_weights = _onset_implementations("onset_weights")[which]
     j, d = 2.0, 0.7
     r = 1.0 - theta
     exact = np.array([j * r * r / 2 + d * r ** 3 / 6, j * r + d * r * r / 2])
     plain = _rk4_with_onset(theta, j, d, 0.0, 0.0)
-    corrected = _rk4_with_onset(theta, j, d, *onset_weights(theta, j, d))
+    corrected = _rk4_with_onset(theta, j, d, *tuple(onset_weights(theta, j, d)))
     assert np.max(np.abs(plain - exact)) > 1e-2
     assert corrected == pytest.approx(exact, abs=1e-14)
 
 
-def test_onset_fraction_is_the_root_of_the_deflection():
+@pytest.mark.parametrize("which", [0, 1], ids=["python", "numba"])
+def test_onset_fraction_is_the_root_of_the_deflection(which):
     """A deflection that is a cubic in the substep (the Hermite interpolant through its end values and rates is
     then exact): the onset is its root, not the linear interpolation's."""
-    from mechanism.cosim.coupling.law_model import onset_fraction
+    onset_fraction = _onset_implementations("onset_fraction")[which]
 
     def delta(s):
         return (s - 0.3) * (s + 0.5) * (3.0 - s) * 1e-7
