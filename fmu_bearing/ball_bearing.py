@@ -122,6 +122,18 @@ class BallBearing:
         """phi_r = cage_angle + 2 pi (r-1)/N_b [rad], eq. (17) with the integrated cage angle."""
         return [cage_angle + 2.0 * math.pi * r / self.n_balls for r in range(self.n_balls)]
 
+    def deflection(self, e_x: float, e_y: float, phi: float) -> float:
+        """delta_r = e . u_r - P_d/2 [m] of the ball at angle ``phi`` [rad] (eq. 18's bracket, u_r = (cos phi,
+        sin phi)): > 0 in the load zone. (``evaluate`` forms the same in the cage frame.)"""
+        return e_x * math.cos(phi) + e_y * math.sin(phi) - self.half_clearance
+
+    @staticmethod
+    def deflection_rate(e_x: float, e_y: float, v_x: float, v_y: float, phi: float, omega: float) -> float:
+        """d delta_r / dt [m/s] of the ball at angle ``phi`` [rad] carried round at the cage speed ``omega`` [rad/s]
+        (eq. 16-17): v . u_r + omega e . u_r', with u_r' = d u_r / d phi = (-sin phi, cos phi)."""
+        c, s = math.cos(phi), math.sin(phi)
+        return v_x * c + v_y * s + omega * (e_y * c - e_x * s)
+
     def check_inputs(self, e_x: float, e_y: float, v_x: float, v_y: float,
                      omega_inner: float = 0.0, omega_outer: float = 0.0) -> None:
         """Raise BearingInputError on non-finite inputs or |e| beyond the divergence limit."""
@@ -195,7 +207,7 @@ class BallBearing:
         """Strain energy stored in the loaded contacts, sum of (2/5) K delta_r^2.5 [J] (tests, energy balance)."""
         total = 0.0
         for phi in self.ball_angles(cage_angle):
-            delta = e_x * math.cos(phi) + e_y * math.sin(phi) - self.half_clearance
+            delta = self.deflection(e_x, e_y, phi)
             if delta > 0:
                 total += 0.4 * self.stiffness * delta ** 2.5
         return total

@@ -282,3 +282,25 @@ def test_valid_parameters_pass():
     validate(TABLE2, 8)
     BallBearing(TABLE2.replace(n_balls=13), 20)             # 37.9 mm sin(pi/13) = 9.1 mm > D
     BallBearing(TABLE2.replace(n_balls=20, allow_ball_overlap=True), 20)   # the paper's 20-ball study
+
+
+# --- a ball's deflection and its rate (eq. 16-18), the one home of the onset location's kinematics -------------
+
+def test_deflection_is_the_load_laws_bracket_and_its_rate_is_its_time_derivative():
+    """delta_r = e . u_r - P_d/2: at phi = 0 and pi/2 the eccentricity's component less the half clearance; a ball
+    is loaded by ``evaluate`` exactly where it is positive; the rate equals a central difference of the deflection
+    along e + v t at the ball angle phi + omega t (an independent formulation of d/dt)."""
+    b = BallBearing(TABLE2)
+    assert b.deflection(3e-5, -7e-6, 0.0) == pytest.approx(3e-5 - HALF, rel=1e-15)
+    assert b.deflection(3e-5, -7e-6, math.pi / 2) == pytest.approx(-7e-6 - HALF, abs=1e-20)
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        e, v, cage = random_loaded_state(rng)
+        _, _, _, loads, _ = run(b, e, np.zeros(2), cage)
+        for r, phi in enumerate(b.ball_angles(cage)):
+            assert (loads[r] > 0.0) == (b.deflection(e[0], e[1], phi) > 0.0)
+        omega, phi, dt = rng.uniform(-300.0, 300.0), rng.uniform(0, 2 * math.pi), 1e-7
+        ahead = b.deflection(e[0] + v[0] * dt, e[1] + v[1] * dt, phi + omega * dt)
+        back = b.deflection(e[0] - v[0] * dt, e[1] - v[1] * dt, phi - omega * dt)
+        rate = b.deflection_rate(e[0], e[1], v[0], v[1], phi, omega)
+        assert rate == pytest.approx((ahead - back) / (2 * dt), rel=1e-6, abs=1e-12)

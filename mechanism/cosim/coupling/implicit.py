@@ -54,10 +54,9 @@ def ball_deflections(bearing: BallBearing, e_x: float, e_y: float, cage_angle: f
     """delta_r = e . u_r - P_d/2 [m] of every ball (eq. 18's bracket; u_r at the ball angles of eq. 17):
     > 0 in the load zone. Used to locate contact onsets (here and in ``mechanism.cosim.monolithic``).
     ``angles``: ``bearing.ball_angles(cage_angle)`` when the caller has them already."""
-    half = bearing.half_clearance
     if angles is None:
         angles = bearing.ball_angles(cage_angle)
-    return [e_x * math.cos(p) + e_y * math.sin(p) - half for p in angles]
+    return [bearing.deflection(e_x, e_y, p) for p in angles]
 
 
 def onset_jumps(bearing: BallBearing, a: Exchanged, cage_a: float, b: Exchanged, cage_b: float) -> list[Jump]:

@@ -164,7 +164,7 @@ class LawModel(InterfaceJacobianImplicit):
         law = self.law
         if law.damping_model != DAMPING_CONSTANT or law.damping_coefficient == 0.0:
             return {}
-        C, half, hs, om = law.damping_coefficient, law.half_clearance, self._h_step / m, self._omega
+        C, hs, om = law.damping_coefficient, self._h_step / m, self._omega
         points = dict(bounds)
         points[m] = (end.e_x, end.e_y, end.v_x, end.v_y)
         spacing = 2.0 * math.pi / law.n_balls
@@ -176,13 +176,12 @@ class LawModel(InterfaceJacobianImplicit):
             pa, pb = self._cage + om * k * hs, self._cage + om * (k + 1) * hs
             g0x = g0y = g1x = g1y = 0.0
             for r in range(law.n_balls):
-                ca, sa = math.cos(pa + r * spacing), math.sin(pa + r * spacing)
-                cb, sb = math.cos(pb + r * spacing), math.sin(pb + r * spacing)
-                da, db = a[0] * ca + a[1] * sa - half, b[0] * cb + b[1] * sb - half
+                ra, rb = pa + r * spacing, pb + r * spacing
+                da, db = law.deflection(a[0], a[1], ra), law.deflection(b[0], b[1], rb)
                 if not (da <= 0.0 and 0.0 < db):
                     continue
-                ma = (a[2] * ca + a[3] * sa + om * (a[1] * ca - a[0] * sa)) * hs     # d delta_r / d sigma
-                mb = (b[2] * cb + b[3] * sb + om * (b[1] * cb - b[0] * sb)) * hs
+                ma = law.deflection_rate(*a, ra, om) * hs     # d delta_r / d sigma
+                mb = law.deflection_rate(*b, rb, om) * hs
                 theta = onset_fraction(da, db, ma, mb)
                 phi = pa + r * spacing + theta * (pb - pa)
                 ux, uy = math.cos(phi), math.sin(phi)

@@ -13,6 +13,13 @@ def _axis(row: dict) -> float | None:
     return row["step"]
 
 
+def log_slope(steps, errors) -> tuple[float, float]:
+    """Least-squares slope and intercept of log(error) against log(step): the observed order of convergence
+    (the study's, the order tests' and ``benchmarks/coarse_step.py``'s)."""
+    slope, intercept = np.polyfit(np.log(steps), np.log(errors), 1)
+    return float(slope), float(intercept)
+
+
 def fit_order(rows: list[dict], metric: str = ORDER_METRIC, floor: float = ORDER_FLOOR,
               ceiling: float = ORDER_CEILING) -> dict:
     """Least-squares slope of log(metric) vs log(step) over stable rows with floor <= metric <= ceiling."""
@@ -23,9 +30,8 @@ def fit_order(rows: list[dict], metric: str = ORDER_METRIC, floor: float = ORDER
     if len(pts) < 3:
         info.update(order=None, reason=f"{len(pts)} point(s) in the asymptotic range (need 3)")
         return info
-    x, y = np.log([p[0] for p in pts]), np.log([p[1] for p in pts])
-    slope, intercept = np.polyfit(x, y, 1)
-    info.update(order=float(slope), intercept=float(intercept), steps=[pts[0][0], pts[-1][0]])
+    slope, intercept = log_slope([p[0] for p in pts], [p[1] for p in pts])
+    info.update(order=slope, intercept=intercept, steps=[pts[0][0], pts[-1][0]])
     return info
 
 
