@@ -258,11 +258,12 @@ def test_substeps_match_the_masters_for_huge_tangents():
             assert cl.substeps(h, arr, 3.0, 1.0, 64) == substeps(h, x, 3.0, 1.0, 64), (k, h)
 
 
-@pytest.mark.parametrize("step, revs, balls", [(1e-4, 0.2, 8), (5e-6, 0.02, 20)])
+@pytest.mark.parametrize("step, revs, balls", [(1e-4, 0.2, 8), (5e-6, 0.02, 20), (1e-5, 0.25, 8)])
 def test_law_model_bit_for_bit(step, revs, balls, monkeypatch):
     """``law-model`` (``law_model_kernel``) against the Python loop's ``LawModel.force`` with the kernels' mechanism
     (``law_model_reference.kernel_mechanism``): bit-identical samples and meta, at the coarse step (contact onsets,
-    substeps from the law's tangent, onset corrections) and at the default step with 20 balls."""
+    substeps from the law's tangent, onset corrections), at a fine step with 20 balls, and at the default step over
+    1250 steps (the compiled loop's chunks of 500: its state carried across two chunk boundaries)."""
     from law_model_reference import kernel_mechanism
     kernel_mechanism(monkeypatch)
     settings = {"damping_model": 1, "damping_coefficient": 50.0, "n_balls": balls}
