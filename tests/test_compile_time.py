@@ -121,3 +121,34 @@ def test_the_warmup_is_started_with_a_python_interpreter(executable, monkeypatch
     monkeypatch.setenv("MECHANISM_COMPILE_WORKER", "1")
     compiled_driver.start_warmup()
     assert all(args[0] == python for args in started) and (python is None) == (not started)
+
+
+@pytest.mark.parametrize("variant", [(True, True), (True, False), (False, True), None])
+def test_the_warmup_compiles_only_the_stages_of_the_runs_step(variant, monkeypatch):
+    """``run_master`` knows the step it will compile (through an FMU or not, law-model's or not) before the loop
+    starts: the warm-up process is asked for that step's stages only (``warmup.needed``: an FMU run's first run does
+    not wait behind the in-process law's stage), every stage without a variant; ``cached`` then looks for it."""
+    from mechanism.cosim import compiled_driver, warmup
+    started = []
+    monkeypatch.setattr(compiled_driver.subprocess, "Popen", lambda args, **kw: started.append(args) or None)
+    monkeypatch.setattr(compiled_driver, "cached", lambda: False)
+    monkeypatch.setattr(compiled_driver, "collect_stages", lambda process: process)
+    monkeypatch.setattr(compiled_driver, "_variant", None)
+    monkeypatch.setenv("MECHANISM_COMPILE_WORKER", "1")
+    monkeypatch.setattr(compiled_driver.os, "cpu_count", lambda: 2)
+    compiled_driver.start_warmup(variant)
+    assert len(started) == 1
+    asked = started[0][started[0].index("mechanism.cosim.warmup") + 1:]
+    assert asked == (warmup.needed(*variant) if variant is not None else [])
+    assert compiled_driver._variant == variant
+    if variant == (True, True):
+        assert "in-process" not in asked and "law-model" in asked
+
+
+def test_a_first_fmu_run_starts_the_warmup_for_its_own_step(monkeypatch):
+    """The headline's step (FMU, the default law-model): ``run_master`` passes (True, True) to ``start_warmup``."""
+    from mechanism.cosim import compiled_driver
+    seen = []
+    monkeypatch.setattr(compiled_driver, "start_warmup", lambda variant=None: seen.append(variant))
+    assert run(RunConfig(revs=0.002, progress=False)).ok
+    assert seen == [(True, True)]

@@ -88,24 +88,35 @@ def cached() -> bool:
         return True
 
 
-def start_warmup() -> subprocess.Popen | None:
+def start_warmup(variant: tuple[bool, bool] | None = None) -> subprocess.Popen | None:
     """On a first run (``cached`` False): start ``mechanism.cosim.warmup`` in a second process, which compiles the
     loop's own functions and the kernels the run calls later into numba's cache (the same source files, the same
     ``NUMBA_CACHE_DIR``) while this process compiles the kernels it calls first; None when cached, with
     ``MECHANISM_COMPILE_WORKER=0`` or one CPU, or if the process cannot start (this one compiles all then). The
-    stages it reports done (its output lines) are collected in ``process.done`` by a thread."""
+    stages it reports done (its output lines) are collected in ``process.done`` by a thread.
+
+    ``variant``: the step the run will compile, (through an FMU, law-model's), as ``CompiledLoop`` will find it
+    (``run_master`` knows it from the endpoint and the scheme before the loop starts): ``cached`` looks for that
+    ``run_steps``, and the process compiles only the stages that step needs (``warmup.needed``), not the other
+    component's exchange nor law-model's for another scheme (about 1.5 s of a first run's critical path).
+    None: every stage, for whichever step comes."""
     wanted = os.environ.get("MECHANISM_COMPILE_WORKER", "1").strip()
     if wanted not in ("0", "1"):
         raise ValueError(f"MECHANISM_COMPILE_WORKER={wanted!r} must be 0 (no second process) or 1")
+    if variant is not None:
+        global _variant
+        _variant = variant
     if wanted == "0" or (os.cpu_count() or 1) < 2 or cached():
         return None
     python = python_executable()
     if python is None:
         return None
+    from mechanism.cosim import warmup
+    stages = warmup.needed(*variant) if variant is not None else []
     root = str(Path(__file__).resolve().parents[2])     # the folder holding the mechanism package imported here
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
     try:    # its own session: a Ctrl-C at the terminal reaches the run, which ends the process itself
-        process = subprocess.Popen([python, "-m", "mechanism.cosim.warmup"], cwd=root, env=env,
+        process = subprocess.Popen([python, "-m", "mechanism.cosim.warmup", *stages], cwd=root, env=env,
                                    stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                    text=True, start_new_session=True)
     except (OSError, TypeError, ValueError):

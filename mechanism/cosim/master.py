@@ -617,7 +617,8 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     if settings.compiled_loop and getattr(endpoint, "kind", None) in ("in-process", "fmu"):
         from mechanism.cosim import compiled_driver
         if loop.kernels:   # a first run: the loop's own functions compile in a second process (None if cached)
-            warmup = compiled_driver.start_warmup()
+            law_model = bool(getattr(loop.scheme, "uses_law", False) and loop.contact_law is not None)
+            warmup = compiled_driver.start_warmup((endpoint.kind == "fmu", law_model))
     try:
         if warmup is not None:
             bar.set_postfix_str("compiling kernels (first run)")
