@@ -24,6 +24,28 @@ from mechanism.output.results import _figures, _peak_of_columns
 ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
 
 
+def kill_worker(w, k: int) -> None:
+    """SIGKILL output worker ``k`` of ``w`` and wait until it is gone (the second is the first's child: its process
+    is gone when it is a zombie or reaped)."""
+    import os
+    import signal
+    import time
+    pid = w.pid(k)
+    os.kill(pid, signal.SIGKILL)
+    if k == 0:
+        w._procs[0].join(5)
+        return
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                if f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X"):
+                    return
+        except OSError:
+            return
+        time.sleep(0.01)
+
+
 def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
     """Equal to the bit (signed zeros and NaN payloads included)."""
     a, b = np.ascontiguousarray(a, float), np.ascontiguousarray(b, float)
@@ -402,7 +424,6 @@ def test_columns_gathered_by_a_worker_that_died_are_read_back(tmp_path, monkeypa
     a block it cannot take; after it: the job it cannot take): those figures are drawn here from the columns read
     back from timeseries.csv (and the tables are the streamed bytes)."""
     import os
-    import signal
 
     from mechanism.cli import ideal_counterpart
     from mechanism.output import stream, workers
@@ -420,13 +441,11 @@ def test_columns_gathered_by_a_worker_that_died_are_read_back(tmp_path, monkeypa
     with workers.OutputWorkers(2) as w, stream.for_run(tmp_path, config, True, w) as sink, \
             stream.for_ideal(tmp_path, config, True, w) as ideal_sink:
         if dies == "during the run":
-            os.kill(w._procs[1].pid, signal.SIGKILL)
-            w._procs[1].join(5)
+            kill_worker(w, 1)
         result = run(config, sink)
         assert sink.gathers(1) and sink.lost == (dies == "during the run")
         if dies == "after the run":
-            os.kill(w._procs[1].pid, signal.SIGKILL)
-            w._procs[1].join(5)
+            kill_worker(w, 1)
         drawing = start_run_plots(result, tmp_path, w)
         early = write_run_table(result, tmp_path)
         kept = compared_columns(result, DRAWN_WITH_IDEAL)

@@ -11,6 +11,27 @@ from mechanism.output import plots, workers
 from mechanism.output.results import write_outputs
 
 
+def kill_worker(w, k: int) -> None:
+    """SIGKILL output worker ``k`` of ``w`` and wait until it is gone (the second is the first's child: its process
+    is gone when it is a zombie or reaped)."""
+    import os
+    import time
+    pid = w.pid(k)
+    os.kill(pid, signal.SIGKILL)
+    if k == 0:
+        w._procs[0].join(5)
+        return
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                if f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X"):
+                    return
+        except OSError:
+            return
+        time.sleep(0.01)
+
+
 @pytest.fixture(scope="module")
 def runs():
     """A short run (the force law in-process) and its ideal counterpart, as the command makes them."""
@@ -61,9 +82,7 @@ def test_a_dead_worker_job_runs_in_process(tmp_path, runs):
     r = runs[0]
     with workers.OutputWorkers(1) as w:
         w.call(0, "resample", _ideal(r), r["time"][:5])      # it is up
-        pid = w._procs[0].pid
-        os.kill(pid, signal.SIGKILL)
-        w._procs[0].join(5)
+        kill_worker(w, 0)
         out = write_outputs(r, tmp_path, None, workers=w)
     assert [os.path.basename(p) for p in out["plots"]] == ["eccentricity.png", "slider_acceleration.png",
                                                            "crank_moment.png", "joint_force.png", "ball_loads.png",
@@ -132,8 +151,7 @@ def test_columns_are_sent_as_raw_bytes(runs):
     with workers.OutputWorkers(1) as w:
         got = w.call(0, "resample", workers.ColumnsOf(coarse, names), r["time"])
         again = w.call(0, "resample", workers.ColumnsOf(coarse, names), r["time"][:7])   # the pipe is in step
-        os.kill(w._procs[0].pid, signal.SIGKILL)
-        w._procs[0].join(5)
+        kill_worker(w, 0)
         local = w.call(0, "resample", workers.ColumnsOf(coarse, names), r["time"])
     ref = resample(RunResult(list(names), np.column_stack([coarse[c] for c in names]), coarse.meta), r["time"])
     assert got.columns == list(names) and np.array_equal(got.data, ref.data) and got.meta == ref.meta

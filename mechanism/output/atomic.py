@@ -24,9 +24,8 @@ def atomic_open(path: Path, mode: str = "w", **kwargs):
     """``open(path, mode)`` on a temporary name beside ``path``, renamed to ``path`` when the block ends
     without an exception (removed otherwise): ``path`` is either its old content or complete."""
     path = Path(path)
-    with _replacing(path, path.with_name(f".{path.name}.{os.getpid()}.tmp")) as tmp:
-        with open(tmp, mode, **kwargs) as f:
-            yield f
+    with _replacing(path, path.with_name(f".{path.name}.{os.getpid()}.tmp")) as tmp, open(tmp, mode, **kwargs) as f:
+        yield f
 
 
 def save_figure(fig, path: Path, **kwargs) -> Path:

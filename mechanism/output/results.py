@@ -246,6 +246,18 @@ REST = (("slider_acceleration.png", "joint_force.png"), ("crank_moment.png", "sl
 DRAWN_WITH_IDEAL = ("time", "crank_angle", "slider_a", "crank_moment", "F_x", "F_y", "slider_x")
 
 
+def drawn_by(n: int, ideal: bool) -> tuple[tuple[str, ...], ...]:
+    """The figures each of ``n`` output workers draws, in the order it draws them (its frames are prepared in that
+    order while the run runs, ``workers.OutputWorkers``): with an ``ideal`` counterpart, ``RUN_ONLY`` and the rest
+    as ``finish_outputs`` shares them; without, ``workers.shares``."""
+    if not ideal:
+        from mechanism.output.workers import shares
+        return shares(n)[:n]
+    if n <= 1:
+        return (RUN_ONLY + REST[0] + REST[1],)[:n]
+    return RUN_ONLY + REST[1], REST[0]
+
+
 def run_only_columns(columns: list[str]) -> tuple[str, ...]:
     """The columns of ``columns`` that only ``RUN_ONLY``'s figures read (with the crank angle and the time): a streamed
     run hands them to the first output worker during the run (``stream.for_run``)."""
