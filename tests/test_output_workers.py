@@ -48,10 +48,13 @@ def _ideal(r: RunResult) -> RunResult:
 
 
 def test_worker_files_are_the_in_process_files(tmp_path, runs):
+    """With or without frames prepared from the run's plan (``figures.Plan``, as the command gives it)."""
+    from mechanism.output.figures import Plan
+    from mechanism.output.results import drawn_by
     r, ideal = runs
     here = write_outputs(r, tmp_path / "here", ideal)
-    for n in (1, 2):
-        with workers.OutputWorkers(n) as w:
+    for n, plan in ((1, None), (2, None), (1, Plan(r.meta, True, 0.2)), (2, Plan(r.meta, True, 0.2))):
+        with workers.OutputWorkers(n, plan, drawn_by(n, False) if plan else ()) as w:
             there = write_outputs(r, tmp_path / f"w{n}", ideal, workers=w)
         assert [os.path.basename(p) for p in there["plots"]] == [os.path.basename(p) for p in here["plots"]]
         assert len(there["plots"]) == len(plots.FIGURES)

@@ -35,3 +35,19 @@ def save_figure(fig, path: Path, **kwargs) -> Path:
     with _replacing(path, path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")) as tmp:
         fig.savefig(tmp, **kwargs)
     return path
+
+
+def save_canvas(canvas, path: Path, **pil_kwargs) -> Path:
+    """The picture an Agg ``canvas`` holds (drawn already: nothing is drawn again) as a PNG at ``path`` (with
+    matplotlib's PNG metadata), written as ``save_figure`` writes: either the old content or whole."""
+    import matplotlib
+    from PIL import Image, PngImagePlugin
+    path = Path(path)
+    rgba = canvas.buffer_rgba()
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Software", f"Matplotlib version{matplotlib.__version__}, https://matplotlib.org/")
+    image = Image.frombuffer("RGBA", (rgba.shape[1], rgba.shape[0]), rgba, "raw", "RGBA", 0, 1)
+    dpi = canvas.figure.dpi
+    with _replacing(path, path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")) as tmp:
+        image.save(tmp, format="png", pnginfo=info, dpi=(dpi, dpi), **pil_kwargs)
+    return path

@@ -23,7 +23,7 @@ from matplotlib.figure import Figure
 
 from fmu_bearing.parameters import BearingParameters
 from mechanism.cosim.record import RunResult
-from mechanism.output.atomic import save_figure
+from mechanism.output.atomic import save_canvas
 from mechanism.output.figures import FIGURES, Plan
 
 #: the PNGs' resolution [dots per inch]; the figures are made at it, so that a warm draw (``prepare``) and the
@@ -98,8 +98,9 @@ def _figure(figsize: tuple[float, float]) -> Figure:
 
 
 def _save(fig, path: Path) -> Path:
-    # zlib level 1: a few percent larger files, several times faster to encode than the default 6
-    save_figure(fig, path, dpi=DPI, pil_kwargs={"compress_level": 1})
+    """The picture ``render`` drew into ``fig``'s canvas as a PNG, written atomically (zlib level 1: a few percent
+    larger files, several times faster to encode than the default 6)."""
+    save_canvas(fig.canvas, path, compress_level=1)
     return path
 
 
@@ -170,6 +171,9 @@ def _clearance(meta: dict) -> float:
 
 #: the start-up panel shows the first START_REVS revolutions
 START_REVS = 0.1
+#: crank angles [π rad] this close are the same end of a window (the recorded crank angle of a run of whole
+#: revolutions ends ~1e-9 short of them)
+ANGLE_TOL = 1e-6
 
 
 def windows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
@@ -177,10 +181,30 @@ def windows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
     revolution, or the second half of a run shorter than two), and the latter's name; x in π rad."""
     end = float(x[-1]) if len(x) else 0.0
     start = x <= 2 * START_REVS
-    if end >= 4.0 - 1e-9:
-        lo = 2.0 * np.floor(end / 2.0 + 1e-9) - 2.0
-        return start, (x >= lo - 1e-9) & (x <= lo + 2.0 + 1e-9), f"revolution {int(lo / 2) + 1}"
+    if end >= 4.0 - ANGLE_TOL:
+        lo = 2.0 * np.floor(end / 2.0 + ANGLE_TOL) - 2.0
+        return start, (x >= lo - ANGLE_TOL) & (x <= lo + 2.0 + ANGLE_TOL), f"revolution {int(lo / 2) + 1}"
     return start, x >= end / 2, "second half of the run"
+
+
+def spans(end: float) -> tuple[tuple[float, float], tuple[float, float], str]:
+    """The crank angle spans [π rad] of ``windows``' start-up and steady windows of a run ending at ``end``
+    (rounded to ``ANGLE_TOL``), and the steady window's name: the panels' x limits, the same whether the end is
+    planned (``figures.Plan``) or recorded."""
+    end = float(np.round(end, 6))
+    if end >= 4.0 - ANGLE_TOL:
+        lo = 2.0 * np.floor(end / 2.0 + ANGLE_TOL) - 2.0
+        steady, name = (lo, lo + 2.0), f"revolution {int(lo / 2) + 1}"
+    else:
+        steady, name = (end / 2, end), "second half of the run"
+    return (0.0, min(2 * START_REVS, end)), steady, name
+
+
+def _xlim(ax, span: tuple[float, float]) -> None:
+    """x limits of ``span`` with autoscale's margins (5 % each side)."""
+    lo, hi = span
+    pad = 0.05 * (hi - lo) if hi > lo else 0.5
+    ax.set_xlim(lo - pad, hi + pad)
 
 
 def time_panels(rows: int = 1, height: float = 3.6):
@@ -208,26 +232,31 @@ def _time_row(axes_row, styles: list[dict], ylabel: str) -> list[tuple[Any, Any]
     return lines
 
 
+def _frame_time_row(axes_row, end: float) -> None:
+    """The x limits and the steady panel's title of a run ending at ``end`` [π rad] (``spans``)."""
+    start, steady, name = spans(end)
+    _xlim(axes_row[0], start)
+    _xlim(axes_row[1], steady)
+    axes_row[1].set_title(f"steady: {name}", fontsize=9, y=TITLE_Y)
+
+
 def _fill_time_row(axes_row, lines, series: list[tuple[np.ndarray, np.ndarray]]) -> None:
-    """``plot_time``'s filling: each curve's points in the start-up and the steady window, the steady panel's
-    title (the window of the last series), the limits."""
-    name = ""
+    """``plot_time``'s filling: each curve's points in the start-up and the steady window, the x limits and the
+    steady panel's title (the window of the last series), the y limits."""
     for (start_line, steady_line), (xs, ys) in zip(lines, series):
-        start, steady, name = windows(xs)
+        start, steady, _ = windows(xs)
         _set_line(start_line, xs[start], ys[start])
         _set_line(steady_line, xs[steady], ys[steady])
-    axes_row[1].set_title(f"steady: {name}", fontsize=9, y=TITLE_Y)
-    _rescale(axes_row)
+    _frame_time_row(axes_row, float(series[-1][0][-1]) if len(series[-1][0]) else 0.0)
+    _rescale_y(axes_row)
 
 
-def _rescale(axes) -> None:
-    """The limits of ``axes`` from their curves' points, as when the curves are drawn with their points (the x
-    limits a frame was warmed with, ``warm``, are let go)."""
+def _rescale_y(axes) -> None:
+    """The y limits of ``axes`` from their curves' points, as autoscale makes them."""
     for ax in axes:
         ax.relim()
-        ax.set_autoscale_on(True)
     for ax in axes:
-        ax.autoscale_view()
+        ax.autoscale_view(scalex=False)
 
 
 def _label_x(axes_row) -> None:
@@ -238,12 +267,16 @@ def _label_x(axes_row) -> None:
 @dataclass
 class Frame:
     """A figure without its data (``build``): ``key`` what it was built for (``frame_key``), ``panels`` the axes,
-    ``lines`` its curves in the order ``FILL`` gives them their points."""
+    ``lines`` its curves in the order ``FILL`` gives them their points, ``dynamic`` the artists that depend on the
+    data (y axes, curves, legends, data's texts: drawn over ``background``, the rest drawn once: ``render``)."""
     name: str
     key: tuple
     fig: Any
     panels: list
     lines: list = field(default_factory=list)
+    dynamic: list = field(default_factory=list)
+    background: Any = None
+    drawn_for: tuple | None = None
 
 
 #: the curves of the time plots: (file, columns, y label, heading)
@@ -262,12 +295,24 @@ def frame_key(name: str, meta: dict, ideal: bool, loads: tuple[str, ...]) -> tup
             loads if name == "ball_loads.png" else None)
 
 
+def _dynamic(ax) -> list:
+    """The artists of panel ``ax`` drawn over the background: its y axis (ticks, labels, grid), curves, legend."""
+    return [ax.yaxis, *ax.get_lines(), *([ax.get_legend()] if ax.get_legend() else [])]
+
+
 def build(name: str, meta: dict, ideal: bool, loads: tuple[str, ...] = ()) -> Frame:
     """The frame of figure ``name`` for a run of ``meta``, with or without an ``ideal`` curve, with the ball-load
     columns ``loads`` (ball_loads.png)."""
+    frame = _build(name, meta, ideal, loads)
+    for artist in frame.dynamic:
+        artist.set_animated(True)     # (left out of the figure's drawing: the background)
+    return frame
+
+
+def _build(name: str, meta: dict, ideal: bool, loads: tuple[str, ...]) -> Frame:
     key = frame_key(name, meta, ideal, loads)
     title = _title(meta)
-    if name == "eccentricity.png":
+    if name == "eccentricity.png":   # (both axes scale with the data: drawn whole, no background)
         fig = _figure((5.5, 5))
         ax = fig.subplots()
         line = ax.plot([], [], lw=0.7, label="journal centre")[0]
@@ -290,7 +335,8 @@ def build(name: str, meta: dict, ideal: bool, loads: tuple[str, ...] = ()) -> Fr
             axes[0, 1].legend(fontsize=8)
         fig.suptitle(f"{heading} ({title})", fontsize=10)
         _margins(fig, top=0.6, **({"hspace": 0.6} if len(columns) > 1 else {}))
-        return Frame(name, key, fig, list(axes.flat), lines)
+        panels = list(axes.flat)
+        return Frame(name, key, fig, panels, lines, [a for ax in panels for a in _dynamic(ax)])
     if name == "ball_loads.png":
         cols = 1 if len(loads) <= 8 else 2
         rows = -(-len(loads) // cols)
@@ -308,18 +354,20 @@ def build(name: str, meta: dict, ideal: bool, loads: tuple[str, ...] = ()) -> Fr
             axes[k % rows, k // rows].set_visible(False)
         fig.suptitle(f"Load on each ball [N]\n({title})", fontsize=10)
         _margins(fig, top=0.55, wspace=0.6, hspace=0.12)
-        return Frame(name, key, fig, [axes[k % rows, k // rows] for k in range(len(loads))], lines)
+        panels = [axes[k % rows, k // rows] for k in range(len(loads))]
+        return Frame(name, key, fig, panels, lines, [fig._suptitle, *(a for ax in panels for a in _dynamic(ax))])
     if name == "energy.png":
         fig = _figure((8, 4))
         ax = fig.subplots()
         lines = [ax.plot([], [], lw=0.8, label=label)[0] for label in ENERGY.values()]
         ax.set_xlabel("crank angle [π rad]")
         ax.set_ylabel("energy [mJ]")
-        ax.set_title(f"Energy account: T + V + D - W_drive - W_cage - E_0 = residual\n({title})", fontsize=10, y=TITLE_Y)
+        ax.set_title(f"Energy account: T + V + D - W_drive - W_cage - E_0 = residual\n({title})", fontsize=10,
+                     y=TITLE_Y)
         ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
         _margins(fig, top=0.55)
-        return Frame(name, key, fig, [ax], lines)
+        return Frame(name, key, fig, [ax], lines, _dynamic(ax))
     raise ValueError(f"no such plot: {name!r} (plots are {FIGURES})")
 
 
@@ -328,10 +376,27 @@ ENERGY = {"damping_dissipation": "damping dissipation D", "contact_energy": "con
           "cage_work": "cage work", "energy_residual": "residual (coupling)"}
 
 
+def _frame_x(frame: Frame, start: float, end: float) -> None:
+    """The data-independent part of ``frame`` for a run from ``start`` to ``end`` [π rad of crank angle]: the x
+    limits (``spans``) and the steady panels' titles."""
+    if frame.name == "eccentricity.png":
+        return
+    if frame.name == "ball_loads.png":
+        for ax in frame.panels:
+            _xlim(ax, spans(end)[1])
+    elif frame.name == "energy.png":
+        _xlim(frame.panels[0], (float(np.round(start, 6)), float(np.round(end, 6))))
+    else:
+        for j in range(0, len(frame.panels), 2):
+            _frame_time_row(frame.panels[j:j + 2], end)
+
+
 def _fill_eccentricity(frame: Frame, r: RunResult, ideal, x) -> None:
     k = envelope(r["e_x"], r["e_y"])
     frame.lines[0].set_data(r["e_x"][k] * 1e6, r["e_y"][k] * 1e6)
-    _rescale(frame.panels)
+    for ax in frame.panels:
+        ax.relim()
+        ax.autoscale_view()
 
 
 def _fill_time(frame: Frame, r: RunResult, ideal, x) -> None:
@@ -354,13 +419,15 @@ def _fill_ball_loads(frame: Frame, r: RunResult, ideal, x) -> None:
     peak0 = max(float(np.max(r[c][start])) if np.any(start) else 0.0 for c in loads)
     frame.fig.suptitle(f"Load on each ball [N], {name} (start-up peak {peak0:.3g} N not shown)\n({run_title(r)})",
                        fontsize=10)
-    _rescale(frame.panels)
+    _frame_x(frame, float(x[0]), float(x[-1]))
+    _rescale_y(frame.panels)
 
 
 def _fill_energy(frame: Frame, r: RunResult, ideal, x) -> None:
     for line, col in zip(frame.lines, ENERGY):
         _set_line(line, x, r[col] * 1e3)
-    _rescale(frame.panels)
+    _frame_x(frame, float(x[0]), float(x[-1]))
+    _rescale_y(frame.panels)
 
 
 #: each figure's filling: (frame, run, ideal or None, crank angle in π rad)
@@ -374,45 +441,51 @@ def _planned_loads(meta: dict) -> tuple[str, ...]:
 
 
 def prepare(plan: Plan, names) -> dict[str, Frame]:
-    """The frames of the figures ``names`` of a run as ``plan`` describes it, each drawn once (``warm``); the
-    figures a run of that joint does not draw are skipped."""
+    """The frames of the figures ``names`` of a run as ``plan`` describes it, their backgrounds drawn (``render``:
+    the x limits and titles of a run ending at ``plan.x_end``); the figures a run of that joint does not draw are
+    skipped."""
     joint = plan.meta.get("config", {}).get("joint", "bearing")
     frames = {}
     for name in names:
         if joint != "bearing" and name in ("ball_loads.png", "energy.png") or joint == "ideal" and (
-                name == "eccentricity.png"):
+                name == "eccentricity.png") or not plan.ideal and name == "slider_position_error.png":
             continue
-        if not plan.ideal and name == "slider_position_error.png":
-            continue
-        frames[name] = warm(build(name, plan.meta, plan.ideal, _planned_loads(plan.meta)), plan.x_end)
+        frame = build(name, plan.meta, plan.ideal, _planned_loads(plan.meta))
+        if plan.x_end is not None and plan.x_end > 0:
+            _frame_x(frame, 0.0, plan.x_end)
+            _draw_background(frame)
+        frames[name] = frame
     return frames
 
 
-def _spans(x_end: float) -> tuple[tuple[float, float], tuple[float, float]]:
-    """The crank angle spans [π rad] of the start-up and the steady window (``windows``) of a run ending at
-    ``x_end`` [π rad]."""
-    if x_end >= 4.0 - 1e-9:
-        lo = 2.0 * np.floor(x_end / 2.0 + 1e-9) - 2.0
-        steady = (lo, lo + 2.0)
-    else:
-        steady = (x_end / 2, x_end)
-    return (0.0, min(2 * START_REVS, x_end)), steady
+def _static_state(frame: Frame) -> tuple:
+    """What the background shows that a run could change: the panels' x limits and titles, the figure's title."""
+    suptitle = frame.fig._suptitle
+    return (tuple(ax.get_xlim() for ax in frame.panels), tuple(ax.get_title() for ax in frame.panels),
+            None if suptitle is None or suptitle in frame.dynamic else suptitle.get_text())
 
 
-def warm(frame: Frame, x_end: float | None = None) -> Frame:
-    """``frame`` drawn once (its tick marks made, its fonts loaded and its fixed texts laid out), with the crank
-    angle axes at the limits a run ending at ``x_end`` [π rad] will have (so that their tick labels are ready
-    too); the limits are let go again (``FILL`` sets them from the data)."""
-    if x_end is not None and x_end > 0 and frame.name != "eccentricity.png":
-        start, steady = _spans(x_end)
-        for k, ax in enumerate(frame.panels):
-            lo, hi = {"ball_loads.png": steady, "energy.png": (0.0, x_end)}.get(frame.name, steady if k % 2 else start)
-            ax.set_xlim(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo))     # autoscale's margins
-            ax.yaxis.get_major_ticks(10)
-    frame.fig.canvas.draw()
-    for ax in frame.panels:
-        ax.set_autoscale_on(True)
-    return frame
+def _draw_background(frame: Frame) -> None:
+    """Draw everything of ``frame`` but its ``dynamic`` artists and keep the picture (``render``)."""
+    canvas = frame.fig.canvas
+    canvas.draw()
+    frame.background = canvas.copy_from_bbox(frame.fig.bbox)
+    frame.drawn_for = _static_state(frame)
+
+
+def render(frame: Frame) -> None:
+    """Draw ``frame`` into its canvas: its background (drawn again if the run changed it: ``_static_state``), then
+    its ``dynamic`` artists over it, in the order a whole drawing puts them (y axis, curves, legend: their z order)."""
+    if not frame.dynamic:
+        frame.fig.canvas.draw()
+        return
+    if frame.background is None or frame.drawn_for != _static_state(frame):
+        _draw_background(frame)
+    canvas = frame.fig.canvas
+    canvas.restore_region(frame.background)
+    renderer = canvas.get_renderer()
+    for artist in frame.dynamic:
+        artist.draw(renderer)
 
 
 def _drawn(r: RunResult, ideal: RunResult | None) -> dict[str, bool]:
@@ -447,5 +520,6 @@ def plot_run(r: RunResult, out: Path, ideal: RunResult | None = None, names=None
         if frame is None or frame.key != key:
             frame = build(name, r.meta, ideal is not None, loads)
         FILL[name](frame, r, ideal, x)
+        render(frame)
         paths.append(_save(frame.fig, out / name))
     return paths
