@@ -470,3 +470,29 @@ def test_only_a_component_without_life_variables_has_its_life_accumulated_from_t
     finally:
         bearing.close()
         clearance.close()
+
+
+def test_an_interrupted_streamed_run_hands_its_rows_on_as_interrupted(tmp_path, monkeypatch):
+    """``run._mark_interrupted`` settles a stopped run as "interrupted": the streamed table's rows still to be handed
+    to an output worker (``TableStream.tail``) carry that status and message, not the master's "failed"."""
+    from mechanism import run as run_module
+    from mechanism.output.results import run_only_columns
+    from mechanism.output.stream import TableStream
+
+    class Keeps:   # an output worker that takes every block
+        def gather(self, k, part):
+            return True
+
+    original = run_module._interruptible
+
+    def interrupting(observe):   # as if SIGINT came as the run started: it stops at its first sample
+        run_module._Stop.signal = "SIGINT"
+        return original(observe)
+    monkeypatch.setattr(run_module._Stop, "signal", None)
+    monkeypatch.setattr(run_module, "_interruptible", interrupting)
+    sink = TableStream(tmp_path / "timeseries.csv", ("time", "slider_a"), gather=(Keeps(), {0: run_only_columns}))
+    with sink:
+        r = run_module.run(run_module.RunConfig(revs=0.2, mode="inprocess", progress=False), sink)
+        tail = sink.tail(0)
+    assert r.status == "interrupted" and r.message.startswith("interrupted by SIGINT")
+    assert (tail.status, tail.message, tail.meta["interrupted"]) == (r.status, r.message, r.meta["interrupted"])

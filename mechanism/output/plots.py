@@ -451,7 +451,7 @@ def prepare(plan: Plan, names) -> dict[str, Frame]:
                 name == "eccentricity.png") or not plan.ideal and name == "slider_position_error.png":
             continue
         frame = build(name, plan.meta, plan.ideal, _planned_loads(plan.meta))
-        if plan.x_end is not None and plan.x_end > 0:
+        if frame.dynamic and plan.x_end is not None and plan.x_end > 0:   # (a frame without is drawn whole)
             _frame_x(frame, 0.0, plan.x_end)
             _draw_background(frame)
         frames[name] = frame
