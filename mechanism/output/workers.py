@@ -300,7 +300,7 @@ def count() -> int:
     in-process), none on a single-CPU machine (nothing would run beside the master) or in a process with
     other threads (a fork copies only the calling one). One worker moves the
     imports and the CSV writing off the command's path at about the same CPU (the fork inherits numpy;
-    docs/kernels.md); two also share the drawing but import matplotlib twice during the run. Measured at 05:10-05:14
+    docs/kernels.md); two also share the drawing (the second forked from the first once it has imported matplotlib: one import since 2026-11-26; before, each imported it). Measured with two imports at 05:10-05:14
     UTC (2 cores, load average 2-6 from other jobs; 11 interleaved pairs of the 2-revolution headline command,
     ``cli.PHASES``): two workers' outputs phase was shorter in 11 of 11 pairs (median ~0.6 s: 1.9 -> 1.3 s), their
     run phase longer by ~0.2-0.4 s (the second import), the whole command shorter in 8 of 11 (median 0.33 s). At
