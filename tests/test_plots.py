@@ -131,3 +131,22 @@ def test_a_frame_for_another_run_is_not_used(tmp_path):
     (tmp_path / "b").mkdir()
     [drawn] = plots.plot_run(r, tmp_path / "a", None, names=("ball_loads.png",), frames=frames)
     assert drawn.read_bytes() == plots.plot_run(r, tmp_path / "b", None, names=("ball_loads.png",))[0].read_bytes()
+
+
+def test_the_png_writer_gives_the_canvas_pixels(tmp_path):
+    """``atomic.png_bytes`` held against Pillow's PNG decoder: the pixels, the resolution and matplotlib's
+    Software text of the canvas a figure was drawn into."""
+    from PIL import Image
+
+    from mechanism.output.atomic import save_canvas
+    fig = plots._figure((3, 2))
+    ax = fig.subplots()
+    ax.plot([0, 1, 2], [1, -1, 0.5], lw=2)
+    ax.set_title("pixels", y=plots.TITLE_Y)
+    fig.canvas.draw()
+    rgba = np.asarray(fig.canvas.buffer_rgba()).copy()
+    save_canvas(fig.canvas, tmp_path / "f.png")
+    with Image.open(tmp_path / "f.png") as im:
+        assert im.mode == "RGBA" and np.array_equal(np.asarray(im), rgba)
+        assert np.allclose(im.info["dpi"], plots.DPI, atol=0.01) and im.info["Software"].startswith("Matplotlib")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.png"]

@@ -454,8 +454,14 @@ def prepare(plan: Plan, names) -> dict[str, Frame]:
         if frame.dynamic and plan.x_end is not None and plan.x_end > 0:   # (a frame without is drawn whole)
             _frame_x(frame, 0.0, plan.x_end)
             _draw_background(frame)
+            for ax in frame.panels:   # the y axes' tick marks made now (the background leaves the y axes out)
+                ax.yaxis.get_major_ticks(Y_TICKS)
         frames[name] = frame
     return frames
+
+
+#: tick marks made beforehand on a prepared frame's y axes (these panels show 4-9; more are made when drawn)
+Y_TICKS = 10
 
 
 def _static_state(frame: Frame) -> tuple:
