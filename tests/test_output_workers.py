@@ -166,3 +166,22 @@ def test_the_run_only_figures_and_the_rest_are_the_figures_once_each():
     from mechanism.output.results import REST, RUN_ONLY
     names = [*RUN_ONLY, *REST[0], *REST[1]]
     assert sorted(names) == sorted(plots.FIGURES)
+
+
+def test_a_worker_that_does_not_answer_is_given_up_and_its_job_runs_in_process(tmp_path, runs, monkeypatch):
+    """A hung worker (stopped here) does not hang the command: after ``ANSWER_TIMEOUT_S`` its job runs in-process,
+    with the same result, and the worker is ended."""
+    r = runs[0]
+    coarse = _ideal(r)
+    monkeypatch.setattr(workers, "ANSWER_TIMEOUT_S", 1.0)
+    with workers.OutputWorkers(1) as w:
+        pid = w.pid(0)
+        proc = w._procs[0]
+        os.kill(pid, signal.SIGSTOP)
+        try:
+            got = w.call(0, "resample", coarse, r["time"])
+        finally:
+            if proc.is_alive():   # (given up: it was killed)
+                os.kill(pid, signal.SIGCONT)
+        assert w._conns[0] is None and not proc.is_alive()
+    assert np.array_equal(got.data, resample(coarse, r["time"]).data)
