@@ -84,10 +84,10 @@ def loop_us(config: RunConfig) -> float:
     return wall * 1e6 / round(config.revs * config.crank_period / config.step)
 
 
-#: the headline command as ``python -m mechanism run`` runs it, then its phases (``cli.PHASES``) as JSON on the
+#: the headline command as ``python -m mechanism run`` runs it (``mechanism/__main__.py``), then its phases (``cli.PHASES``) as JSON on the
 #: last line of stderr
 HEADLINE = ("import json, sys; from mechanism import cli; code = cli.main(sys.argv[1:]); "
-            "print(json.dumps(cli.PHASES), file=sys.stderr); sys.exit(code)")
+            "print(json.dumps(cli.PHASES), file=sys.stderr); cli.exit_now(code)")
 
 
 def headline(extra_env: dict | None = None) -> dict:

@@ -116,7 +116,8 @@ def cmd_run(args) -> int:
     config = config_from_ssp_args(args) if args.ssp else config_from_args(args)
     PHASES.clear()
     # the streams' files are removed unless they were completed (renamed onto timeseries.csv, ideal_timeseries.csv)
-    with output_lock(out), output_workers(not args.no_plots) as workers, \
+    ideal_planned = config.joint != "ideal" and not args.no_ideal
+    with output_lock(out), output_workers(not args.no_plots, figure_plan(config, ideal_planned)) as workers, \
             stream.for_run(out, config, not args.no_plots, workers, config.joint != "ideal" and not args.no_ideal) \
             as sink, \
             stream.for_ideal(out, config, not args.no_plots, workers) as ideal_sink:
@@ -176,16 +177,32 @@ def cmd_run(args) -> int:
 
 
 @contextmanager
-def output_workers(plots: bool):
-    """``mechanism.output.workers.OutputWorkers`` for a run that plots (they import matplotlib while the run
-    runs), None otherwise or where they are disabled."""
+def output_workers(plots: bool, plan=None):
+    """``mechanism.output.workers.OutputWorkers`` for a run that plots (they import matplotlib and, given the
+    run's ``plan`` (``figure_plan``), prepare its figures' frames while the run runs), None otherwise or where
+    they are disabled."""
     from mechanism.output import workers
+    from mechanism.output.results import drawn_by
     n = workers.count() if plots else 0
     if not n:
         yield None
         return
-    with workers.OutputWorkers(n) as started:
+    names = drawn_by(n, plan.ideal) if plan is not None else ()
+    with workers.OutputWorkers(n, plan, names) as started:
         yield started
+
+
+def figure_plan(config: RunConfig, ideal: bool):
+    """What the run of ``config`` will record in its meta for the figures (``run.run``'s configuration, crank
+    period and clearance), with or without an ``ideal`` counterpart, ending at 2 ``revs`` π rad of crank angle:
+    ``mechanism.output.figures.Plan``."""
+    from dataclasses import asdict
+
+    from mechanism.output.figures import Plan
+    from mechanism.run import clearance_per_side
+    meta = {"config": asdict(config), "crank_period_s": config.crank_period,
+            "clearance_per_side_m": clearance_per_side(config)}
+    return Plan(meta, ideal, 2.0 * config.revs)
 
 
 def ideal_counterpart(config: RunConfig, result, workers=None, sink=None):
@@ -292,5 +309,23 @@ def call(func, args) -> int:
         print(f"error: {cause}".splitlines()[0], file=sys.stderr)
         return 2 if isinstance(err, (ValueError, FileNotFoundError)) else 1
 
+def exit_now(code: int) -> None:
+    """End the process with ``code`` as ``sys.exit`` would, without Python's tear-down of every module's objects
+    (numba's, fmpy's: ~0.2-0.3 s of the headline command, issue 11): the atexit handlers run (the FMUs' extracted
+    folders are removed, logging is flushed), stdout and stderr are flushed, then ``os._exit``. Every file the
+    commands write is closed by then. With another non-daemon thread alive, a normal exit (it waits for it)."""
+    import atexit
+    others = [t for t in threading.enumerate() if t is not threading.main_thread() and not t.daemon and t.is_alive()]
+    if others:
+        sys.exit(code)
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):   # a closed pipe: nothing more to write there
+            pass
+    os._exit(code if isinstance(code, int) else 1)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_now(main())

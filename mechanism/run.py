@@ -218,12 +218,15 @@ def _interruptible(observe):
 
 
 def _mark_interrupted(result: RunResult) -> RunResult:
-    """A run stopped by ``Interrupted`` is "interrupted", not "failed"."""
+    """A run stopped by ``Interrupted`` is "interrupted", not "failed" (a streamed run's table too: the rows it hands
+    the output workers carry its status, ``stream.TableStream.tail``)."""
     if _Stop.signal is not None and result.status == "failed":
         t = result.meta.pop("failure", {}).get("time_s")
         result.status = "interrupted"
         result.meta["interrupted"] = {"signal": _Stop.signal, "time_s": t}
         result.message = f"interrupted by {_Stop.signal}" + (f" at t = {t:.9g} s" if t is not None else "")
+        if result.streamed is not None:
+            result.streamed.stream.mark(result.meta, result.status, result.message)
     return result
 
 

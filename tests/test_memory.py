@@ -24,6 +24,28 @@ from mechanism.output.results import _figures, _peak_of_columns
 ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
 
 
+def kill_worker(w, k: int) -> None:
+    """SIGKILL output worker ``k`` of ``w`` and wait until it is gone (the second is the first's child: its process
+    is gone when it is a zombie or reaped)."""
+    import os
+    import signal
+    import time
+    pid = w.pid(k)
+    os.kill(pid, signal.SIGKILL)
+    if k == 0:
+        w._procs[0].join(5)
+        return
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                if f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X"):
+                    return
+        except OSError:
+            return
+        time.sleep(0.01)
+
+
 def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
     """Equal to the bit (signed zeros and NaN payloads included)."""
     a, b = np.ascontiguousarray(a, float), np.ascontiguousarray(b, float)
@@ -402,7 +424,6 @@ def test_columns_gathered_by_a_worker_that_died_are_read_back(tmp_path, monkeypa
     a block it cannot take; after it: the job it cannot take): those figures are drawn here from the columns read
     back from timeseries.csv (and the tables are the streamed bytes)."""
     import os
-    import signal
 
     from mechanism.cli import ideal_counterpart
     from mechanism.output import stream, workers
@@ -420,13 +441,11 @@ def test_columns_gathered_by_a_worker_that_died_are_read_back(tmp_path, monkeypa
     with workers.OutputWorkers(2) as w, stream.for_run(tmp_path, config, True, w) as sink, \
             stream.for_ideal(tmp_path, config, True, w) as ideal_sink:
         if dies == "during the run":
-            os.kill(w._procs[1].pid, signal.SIGKILL)
-            w._procs[1].join(5)
+            kill_worker(w, 1)
         result = run(config, sink)
         assert sink.gathers(1) and sink.lost == (dies == "during the run")
         if dies == "after the run":
-            os.kill(w._procs[1].pid, signal.SIGKILL)
-            w._procs[1].join(5)
+            kill_worker(w, 1)
         drawing = start_run_plots(result, tmp_path, w)
         early = write_run_table(result, tmp_path)
         kept = compared_columns(result, DRAWN_WITH_IDEAL)
@@ -451,3 +470,29 @@ def test_only_a_component_without_life_variables_has_its_life_accumulated_from_t
     finally:
         bearing.close()
         clearance.close()
+
+
+def test_an_interrupted_streamed_run_hands_its_rows_on_as_interrupted(tmp_path, monkeypatch):
+    """``run._mark_interrupted`` settles a stopped run as "interrupted": the streamed table's rows still to be handed
+    to an output worker (``TableStream.tail``) carry that status and message, not the master's "failed"."""
+    from mechanism import run as run_module
+    from mechanism.output.results import run_only_columns
+    from mechanism.output.stream import TableStream
+
+    class Keeps:   # an output worker that takes every block
+        def gather(self, k, part):
+            return True
+
+    original = run_module._interruptible
+
+    def interrupting(observe):   # as if SIGINT came as the run started: it stops at its first sample
+        run_module._Stop.signal = "SIGINT"
+        return original(observe)
+    monkeypatch.setattr(run_module._Stop, "signal", None)
+    monkeypatch.setattr(run_module, "_interruptible", interrupting)
+    sink = TableStream(tmp_path / "timeseries.csv", ("time", "slider_a"), gather=(Keeps(), {0: run_only_columns}))
+    with sink:
+        r = run_module.run(run_module.RunConfig(revs=0.2, mode="inprocess", progress=False), sink)
+        tail = sink.tail(0)
+    assert r.status == "interrupted" and r.message.startswith("interrupted by SIGINT")
+    assert (tail.status, tail.message, tail.meta["interrupted"]) == (r.status, r.message, r.meta["interrupted"])

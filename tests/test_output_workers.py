@@ -11,6 +11,27 @@ from mechanism.output import plots, workers
 from mechanism.output.results import write_outputs
 
 
+def kill_worker(w, k: int) -> None:
+    """SIGKILL output worker ``k`` of ``w`` and wait until it is gone (the second is the first's child: its process
+    is gone when it is a zombie or reaped)."""
+    import os
+    import time
+    pid = w.pid(k)
+    os.kill(pid, signal.SIGKILL)
+    if k == 0:
+        w._procs[0].join(5)
+        return
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                if f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X"):
+                    return
+        except OSError:
+            return
+        time.sleep(0.01)
+
+
 @pytest.fixture(scope="module")
 def runs():
     """A short run (the force law in-process) and its ideal counterpart, as the command makes them."""
@@ -27,10 +48,13 @@ def _ideal(r: RunResult) -> RunResult:
 
 
 def test_worker_files_are_the_in_process_files(tmp_path, runs):
+    """With or without frames prepared from the run's plan (``figures.Plan``, as the command gives it)."""
+    from mechanism.output.figures import Plan
+    from mechanism.output.results import drawn_by
     r, ideal = runs
     here = write_outputs(r, tmp_path / "here", ideal)
-    for n in (1, 2):
-        with workers.OutputWorkers(n) as w:
+    for n, plan in ((1, None), (2, None), (1, Plan(r.meta, True, 0.2)), (2, Plan(r.meta, True, 0.2))):
+        with workers.OutputWorkers(n, plan, drawn_by(n, False) if plan else ()) as w:
             there = write_outputs(r, tmp_path / f"w{n}", ideal, workers=w)
         assert [os.path.basename(p) for p in there["plots"]] == [os.path.basename(p) for p in here["plots"]]
         assert len(there["plots"]) == len(plots.FIGURES)
@@ -61,9 +85,7 @@ def test_a_dead_worker_job_runs_in_process(tmp_path, runs):
     r = runs[0]
     with workers.OutputWorkers(1) as w:
         w.call(0, "resample", _ideal(r), r["time"][:5])      # it is up
-        pid = w._procs[0].pid
-        os.kill(pid, signal.SIGKILL)
-        w._procs[0].join(5)
+        kill_worker(w, 0)
         out = write_outputs(r, tmp_path, None, workers=w)
     assert [os.path.basename(p) for p in out["plots"]] == ["eccentricity.png", "slider_acceleration.png",
                                                            "crank_moment.png", "joint_force.png", "ball_loads.png",
@@ -132,8 +154,7 @@ def test_columns_are_sent_as_raw_bytes(runs):
     with workers.OutputWorkers(1) as w:
         got = w.call(0, "resample", workers.ColumnsOf(coarse, names), r["time"])
         again = w.call(0, "resample", workers.ColumnsOf(coarse, names), r["time"][:7])   # the pipe is in step
-        os.kill(w._procs[0].pid, signal.SIGKILL)
-        w._procs[0].join(5)
+        kill_worker(w, 0)
         local = w.call(0, "resample", workers.ColumnsOf(coarse, names), r["time"])
     ref = resample(RunResult(list(names), np.column_stack([coarse[c] for c in names]), coarse.meta), r["time"])
     assert got.columns == list(names) and np.array_equal(got.data, ref.data) and got.meta == ref.meta
@@ -145,3 +166,22 @@ def test_the_run_only_figures_and_the_rest_are_the_figures_once_each():
     from mechanism.output.results import REST, RUN_ONLY
     names = [*RUN_ONLY, *REST[0], *REST[1]]
     assert sorted(names) == sorted(plots.FIGURES)
+
+
+def test_a_worker_that_does_not_answer_is_given_up_and_its_job_runs_in_process(tmp_path, runs, monkeypatch):
+    """A hung worker (stopped here) does not hang the command: after ``ANSWER_TIMEOUT_S`` its job runs in-process,
+    with the same result, and the worker is ended."""
+    r = runs[0]
+    coarse = _ideal(r)
+    monkeypatch.setattr(workers, "ANSWER_TIMEOUT_S", 1.0)
+    with workers.OutputWorkers(1) as w:
+        pid = w.pid(0)
+        proc = w._procs[0]
+        os.kill(pid, signal.SIGSTOP)
+        try:
+            got = w.call(0, "resample", coarse, r["time"])
+        finally:
+            if proc.is_alive():   # (given up: it was killed)
+                os.kill(pid, signal.SIGCONT)
+        assert w._conns[0] is None and not proc.is_alive()
+    assert np.array_equal(got.data, resample(coarse, r["time"]).data)

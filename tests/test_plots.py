@@ -1,7 +1,7 @@
 """The run plots read as the issue asks: one panel per actual ball, the steady revolution on its own scale
 beside a start-up panel, titles with speed, ball count, damping and clearance."""
-import pytest
 import numpy as np
+import pytest
 
 from mechanism.cosim.record import RunResult
 from mechanism.output import plots
@@ -32,7 +32,7 @@ def test_plots_one_panel_per_ball_steady_scale_and_full_titles(tmp_path, monkeyp
 
     monkeypatch.setattr(plots, "_save", keep)
     plots.plot_run(fake_run(8), tmp_path)
-    axes, title = saved["ball_loads.png"]
+    axes, _ = saved["ball_loads.png"]
     assert len(axes) == 8
     for name in ("ball_loads.png", "joint_force.png", "slider_acceleration.png", "eccentricity.png"):
         text = saved[name][1]
@@ -81,7 +81,8 @@ def test_a_figure_is_written_whole_or_not_at_all(tmp_path):
     fig = plt.figure()
 
     def broken(target, **kwargs):
-        open(target, "wb").write(b"\x89PNG half")
+        with open(target, "wb") as f:
+            f.write(b"\x89PNG half")
         raise OSError(28, "No space left on device")
 
     good = fig.savefig
@@ -93,3 +94,59 @@ def test_a_figure_is_written_whole_or_not_at_all(tmp_path):
     save_figure(fig, path, dpi=50)
     plt.close(fig)
     assert path.read_bytes()[:4] == b"\x89PNG" and sorted(p.name for p in tmp_path.iterdir()) == ["f.png"]
+
+
+def test_prepared_frames_draw_the_bytes_of_frames_built_with_the_data(tmp_path):
+    """A figure drawn over a frame prepared before the data (``plots.prepare``: the output workers do it while the
+    run runs) is the file drawn without one; a frame prepared for another end of the run (its background drawn
+    for other x limits and titles) is drawn again, to the same bytes."""
+    from mechanism.output.figures import Plan
+    r = fake_run(8)
+    angle = r["crank_angle"]
+    energy = {"damping_dissipation": 1e-3 * angle, "contact_energy": 1e-4 * np.sin(angle) ** 2,
+              "cage_work": -1e-5 * angle, "energy_residual": 1e-7 * np.cos(3 * angle)}
+    r = RunResult(r.columns + list(energy), np.column_stack([r.data, *energy.values()]), r.meta)
+    ideal = RunResult(r.columns, r.data.copy(), r.meta)
+    ideal.data[:, ideal.columns.index("slider_x")] += 1e-6
+    (tmp_path / "here").mkdir()
+    here = plots.plot_run(r, tmp_path / "here", ideal)
+    assert [p.name for p in here] == list(plots.FIGURES)
+    for end in (4.0, 3.0):
+        frames = plots.prepare(Plan(r.meta, True, end), plots.FIGURES)
+        assert sorted(frames) == sorted(plots.FIGURES)
+        (tmp_path / f"{end}").mkdir()
+        there = plots.plot_run(r, tmp_path / f"{end}", ideal, frames=frames)
+        assert not frames     # every frame was used
+        for a, b in zip(here, there):
+            assert a.read_bytes() == b.read_bytes(), (end, a.name)
+
+
+def test_a_frame_for_another_run_is_not_used(tmp_path):
+    """A prepared frame whose run differs from the data's (another ball count here) is built again."""
+    from mechanism.output.figures import Plan
+    r = fake_run(8)
+    frames = plots.prepare(Plan({**r.meta, "config": {**r.meta["config"], "balls": 12}}, False, 4.0),
+                           ("ball_loads.png",))
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    [drawn] = plots.plot_run(r, tmp_path / "a", None, names=("ball_loads.png",), frames=frames)
+    assert drawn.read_bytes() == plots.plot_run(r, tmp_path / "b", None, names=("ball_loads.png",))[0].read_bytes()
+
+
+def test_the_png_writer_gives_the_canvas_pixels(tmp_path):
+    """``atomic.png_bytes`` held against Pillow's PNG decoder: the pixels, the resolution and matplotlib's
+    Software text of the canvas a figure was drawn into."""
+    from PIL import Image
+
+    from mechanism.output.atomic import save_canvas
+    fig = plots._figure((3, 2))
+    ax = fig.subplots()
+    ax.plot([0, 1, 2], [1, -1, 0.5], lw=2)
+    ax.set_title("pixels", y=plots.TITLE_Y)
+    fig.canvas.draw()
+    rgba = np.asarray(fig.canvas.buffer_rgba()).copy()
+    save_canvas(fig.canvas, tmp_path / "f.png")
+    with Image.open(tmp_path / "f.png") as im:
+        assert im.mode == "RGBA" and np.array_equal(np.asarray(im), rgba)
+        assert np.allclose(im.info["dpi"], plots.DPI, atol=0.01) and im.info["Software"].startswith("Matplotlib")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.png"]

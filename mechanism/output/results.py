@@ -237,13 +237,24 @@ def plotted_columns(r: RunResult) -> tuple[str, ...]:
 #: the figures drawn from the run alone (no ideal curve in them): a worker draws them while the ideal counterpart
 #: runs, after which the command keeps only ``DRAWN_WITH_IDEAL`` of the run's table (``start_run_plots``)
 RUN_ONLY = ("eccentricity.png", "ball_loads.png", "energy.png")
-#: the other figures (drawn with the ideal curve): with two workers, the second draws the first share while the
-#: first worker draws the second after ``RUN_ONLY`` (drawing times, PNG of a 2-revolution run: joint force 0.45 s,
-#: slider acceleration 0.22 against ball loads 0.45, energy 0.17, eccentricity 0.10, position error 0.21, crank
-#: moment 0.20: ``workers.SHARES``)
+#: the other figures (drawn with the ideal curve): with two workers, the second draws them all (``finish_outputs``)
+#: while the first draws ``RUN_ONLY``: over frames prepared during the run (``plots.prepare``) the figures take ~30-80
+#: ms each once the data are complete, and the second worker, whose figures wait for the ideal counterpart, has the
+#: time to prepare their frames (at a lower priority, ``workers.SECOND_NICE``); one worker draws them after ``RUN_ONLY``
 REST = (("slider_acceleration.png", "joint_force.png"), ("crank_moment.png", "slider_position_error.png"))
 #: the run's columns the other figures read (``plots.plot_run``), ``COMPARED`` among them
 DRAWN_WITH_IDEAL = ("time", "crank_angle", "slider_a", "crank_moment", "F_x", "F_y", "slider_x")
+
+
+def drawn_by(n: int, ideal: bool) -> tuple[tuple[str, ...], ...]:
+    """The figures each of ``n`` output workers draws, in the order it draws them (its frames are prepared in that
+    order while the run runs, ``workers.OutputWorkers``): with an ``ideal`` counterpart, ``RUN_ONLY`` and the rest
+    as ``finish_outputs`` shares them; without, ``workers.shares``."""
+    if not ideal:
+        from mechanism.output.workers import shares
+        return shares(n)[:n]
+    rest = tuple(name for name in FIGURES if name in REST[0] + REST[1])
+    return (RUN_ONLY + rest,)[:n] if n <= 1 else (RUN_ONLY, rest)
 
 
 def run_only_columns(columns: list[str]) -> tuple[str, ...]:
@@ -314,9 +325,9 @@ def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult
         return _finish_gathered(figures, result, out, ideal, workers, drawing, plots)
     if stream is not None and stream.lost:   # some went to a worker that could not take them: read back
         _read_back(result)
-    # two workers: the second takes REST[0] at once, the first REST[1] after its run-only figures (about equal
-    # ends); one worker: all of them after its run-only figures, once the tables are written
-    shares = (REST[0], REST[1]) if len(workers) > 1 else (REST[0] + REST[1],)
+    # two workers: the second takes them all at once (the first only if the second cannot, after its run-only
+    # figures); one worker: all of them after its run-only figures, once the tables are written
+    shares = (REST[0] + REST[1], ()) if len(workers) > 1 else (REST[0] + REST[1],)
     shares = tuple(tuple(name for name in FIGURES if name in share) for share in shares) if plots else ()
     sent = ColumnsOf(result, tuple(c for c in result.columns if c in DRAWN_WITH_IDEAL))
     job, ideal_sent = _ideal_sent(ideal)
@@ -337,7 +348,7 @@ def finish_outputs(figures: dict, result: RunResult, out: Path, ideal: RunResult
     finally:   # the workers' files are complete before anything else happens
         collect(k, fallback, out, None, names=RUN_ONLY, job="plots")
     if not errors:   # the first worker's next share (sent now: it reads it at once, the command does not wait)
-        submitted += [share for names in shares[len(submitted):] for share in submit(k, names)]
+        submitted += [share for names in shares[len(submitted):] if names for share in submit(k, names)]
     for j, names in submitted:
         collect(j, sent, out, ideal_sent, names=names)
     if errors:

@@ -198,6 +198,11 @@ class TableStream:
         streamed = Streamed(self.columns, self._figures, energy, window, self._life, self)
         return RunResult(self.kept, data, meta, status, message, streamed)
 
+    def mark(self, meta: dict, status: str, message: str) -> None:
+        """The run's meta, status and message as they were settled after ``result`` (``run._mark_interrupted``: an
+        interrupted run, not a failed one), for the rows handed over later (``tail``)."""
+        self.meta, self.status, self.message = meta, status, message
+
     # ----------------------------------------------------------------------------------------- accumulating
     def _accumulate(self, block: np.ndarray) -> None:
         from .results import _figures

@@ -10,11 +10,17 @@ share each, ``SHARES``). A worker receives only the columns the figures read, as
 command makes no pickled copy of its tables, issue 11). The files are the same bytes as drawn in-process (the
 same functions, ``plots.plot_run`` and ``record.resample``, run in another process) and are written atomically as before (``atomic.save_figure``).
 
+The first worker imports matplotlib and then forks the second (a "zygote": matplotlib imported once, ~0.7 s of
+CPU less beside the run); each then builds the frames of the figures it will draw (``plots.prepare``: figure,
+panels, labels, titles, a first drawing) from the run's ``figures.Plan`` while the run runs, between jobs, so that
+only the data's part of each figure is left once the data are complete.
+
 Robustness: the workers ignore SIGINT (the command decides what an interrupt does: ``run.stop_on_signals``)
-and end when the command's end of their pipe closes (the command died) or at ``close``; an error in a job is
-raised in the command as if the job had run there; a worker that cannot start or dies, or a job that does not
-pickle, makes the job run in-process instead. ``MECHANISM_OUTPUT_WORKERS`` (``count``) sets how many; 0 (or a
-single CPU, or no fork) does everything in-process.
+and end when the command's end of their pipe closes (the command died) or at ``close``; the first ends the second
+when it ends (or is terminated). An error in a job is raised in the command as if the job had run there; a worker
+that cannot start, dies, or does not answer within ``ANSWER_TIMEOUT_S``, or a job that does not pickle, makes the
+job run in-process instead. ``MECHANISM_OUTPUT_WORKERS`` (``count``) sets how many; 0 (or a single CPU, or no fork)
+does everything in-process.
 """
 from __future__ import annotations
 
@@ -26,6 +32,7 @@ import os
 import signal
 import sys
 import threading
+import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -40,10 +47,20 @@ import numpy as np
 SHARES = (("joint_force.png", "slider_acceleration.png", "energy.png", "eccentricity.png"),
           ("ball_loads.png", "slider_position_error.png", "crank_moment.png"))
 
-#: modules a worker imports while it waits for its first job (the first also resamples)
-#: (the resampling no longer needs scipy.interpolate: ``mechanism.cosim.spline``, so ~20 MB less per worker)
+#: modules the first worker imports while it waits for its first job, before it forks the second (the first also
+#: resamples; the resampling no longer needs scipy.interpolate: ``mechanism.cosim.spline``, so ~20 MB less per worker)
 IMPORTS = ("mechanism.output.plots", "mechanism.cosim.record", "mechanism.cosim.spline")
-IMPORTS_OTHERS = ("mechanism.output.plots",)
+
+#: the second worker's niceness: it prepares its frames while the run runs with time to spare (its figures wait
+#: for the ideal counterpart), so it gives way to the run and the first worker. Measured 2026-11-26 10:40 UTC (load
+#: average 2.3-2.7 from other jobs, 5 interleaved pairs of ``benchmarks/cosim.py``'s headline): the run phase
+#: 2.22-2.98 s against 2.54-2.83 s without, the outputs 0.46-0.68 s against 0.40-0.56 s, the whole command median
+#: 3.53 s against 3.78 s
+SECOND_NICE = 5
+
+#: seconds the command waits for a worker's answer (a job's, or a block's receipt) before it gives the worker up
+#: and runs the job itself: far beyond a job's time (a figure takes ~0.1-0.3 s, a block's receipt milliseconds)
+ANSWER_TIMEOUT_S = 120.0
 
 
 def shares(n: int) -> tuple[tuple[str, ...], ...]:
@@ -53,9 +70,13 @@ def shares(n: int) -> tuple[tuple[str, ...], ...]:
     return SHARES
 
 
+#: the frames this worker prepared (``plots.prepare``), taken by the figures it draws (empty in the command)
+_FRAMES: dict = {}
+
+
 def _plots(*args, **kwargs):
     from mechanism.output.plots import plot_run
-    return plot_run(*args, **kwargs)
+    return plot_run(*args, frames=_FRAMES, **kwargs)
 
 
 def _resample(*args):
@@ -172,25 +193,92 @@ def _send_answer(conn, answer: tuple) -> None:
         conn.send_bytes(np.ascontiguousarray(column))
 
 
-def _forked(conn, ours, modules) -> None:
-    """The worker process (forked by ``OutputWorkers``): SIGINT ignored, SIGTERM ends it; the command's end of
-    the pipe closed here, so that the command's death is an end of file."""
+def _forked(conns: list, ours: list, modules, plan=None, names: tuple = ()) -> None:
+    """The first worker process (forked by ``OutputWorkers``): SIGINT ignored, SIGTERM ends it and the second; the
+    command's ends of the pipes closed here, so that the command's death is an end of file. It imports ``modules``,
+    forks a worker for each further pipe of ``conns`` (the second: matplotlib imported already), then serves
+    ``conns[0]``; ``names[k]``: the figures whose frames worker k prepares from ``plan``."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    ours.close()
-    serve(conn, modules)
+    children: list[int] = []
+
+    def end(signum=None, frame=None) -> None:
+        """End the workers forked here (the second may be hung: it is not waited for otherwise), reap them."""
+        for pid in children:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGTERM)
+        for pid in children:
+            with contextlib.suppress(OSError):
+                os.waitpid(pid, 0)
+        children.clear()
+        if signum is not None:
+            os._exit(0)
+
+    signal.signal(signal.SIGTERM, end)
+    for conn in ours:
+        conn.close()
+    _import(modules)
+    for k in range(1, len(conns)):
+        for stream in (sys.stdout, sys.stderr):   # nothing buffered twice
+            with contextlib.suppress(Exception):
+                stream.flush()
+        try:
+            pid = os.fork()
+        except OSError:   # no second worker: the command finds its pipe closed and draws its share itself
+            pid = -1
+        if pid == 0:   # the second worker: its own pipe only, ended by SIGTERM (the first's), no clean-up of the first's
+            try:
+                signal.signal(signal.SIGTERM, signal.SIG_DFL)
+                with contextlib.suppress(OSError):
+                    os.nice(SECOND_NICE)
+                children.clear()
+                for j, conn in enumerate(conns):
+                    if j != k:
+                        conn.close()
+                serve(conns[k], (), plan, names[k] if k < len(names) else ())
+            finally:
+                os._exit(0)
+        if pid > 0:
+            children.append(pid)
+        conns[k].close()
+    try:
+        serve(conns[0], (), plan, names[0] if names else ())
+    finally:
+        end()
 
 
-def serve(conn, modules) -> None:
-    """A worker: import ``modules``, then answer each ``(job, args, kwargs)`` received on ``conn`` with
-    ``("ok", value)`` or ``("error", exception)`` until ``None`` or the end of the connection."""
+def _import(modules) -> None:
     for name in modules:
         try:
             importlib.import_module(name)
         except ImportError:   # the job will raise it where it is needed
             pass
+
+
+def _prepare(conn, plan, names) -> list[str]:
+    """The frames of ``names`` (``plots.prepare``) into ``_FRAMES``, one at a time while no job waits on ``conn``;
+    the names left."""
+    pending = list(names)
+    while pending and not conn.poll():
+        name = pending.pop(0)
+        with contextlib.suppress(Exception):   # (then the figure is drawn without a prepared frame: the same bytes)
+            from mechanism.output.plots import prepare
+            _FRAMES.update(prepare(plan, (name,)))
+    return pending
+
+
+def serve(conn, modules, plan=None, names: tuple = ()) -> None:
+    """A worker: import ``modules``, then answer each ``(job, args, kwargs)`` received on ``conn`` with
+    ``("ok", value)`` or ``("error", exception)`` until ``None`` or the end of the connection; between jobs,
+    prepare the frames of the figures ``names`` of ``plan`` (a ``figures.Plan``)."""
+    _import(modules)
+    try:
+        conn.send(("pid", os.getpid()))   # (the command learns the process id of a worker it did not fork)
+    except (OSError, ValueError):
+        return
+    pending = tuple(names) if plan is not None else ()
     while True:
         try:
+            pending = _prepare(conn, plan, pending) if pending else ()
             job = conn.recv()
         except (EOFError, OSError):
             return
@@ -205,6 +293,9 @@ def serve(conn, modules) -> None:
             answer = ("ok", JOBS[name](*args, **kwargs))
         except Exception as err:   # noqa: BLE001 - raised again in the command
             answer = ("error", err)
+        if name.startswith("plots"):   # (its figures are drawn: their frames are not prepared any more)
+            drawn = kwargs.get("names")
+            pending = () if drawn is None else tuple(n for n in pending if n not in drawn)
         try:
             _send_answer(conn, answer)
         except (OSError, ValueError):   # the command has gone
@@ -218,7 +309,7 @@ def count() -> int:
     in-process), none on a single-CPU machine (nothing would run beside the master) or in a process with
     other threads (a fork copies only the calling one). One worker moves the
     imports and the CSV writing off the command's path at about the same CPU (the fork inherits numpy;
-    docs/kernels.md); two also share the drawing but import matplotlib twice during the run. Measured at 05:10-05:14
+    docs/kernels.md); two also share the drawing (the second forked from the first once it has imported matplotlib: one import since 2026-11-26; before, each imported it). Measured with two imports at 05:10-05:14
     UTC (2 cores, load average 2-6 from other jobs; 11 interleaved pairs of the 2-revolution headline command,
     ``cli.PHASES``): two workers' outputs phase was shorter in 11 of 11 pairs (median ~0.6 s: 1.9 -> 1.3 s), their
     run phase longer by ~0.2-0.4 s (the second import), the whole command shorter in 8 of 11 (median 0.33 s). At
@@ -241,32 +332,38 @@ class OutputWorkers:
     """Worker processes that run ``JOBS``; ``submit`` hands one a job, ``result`` waits for its answer. Use as a
     context manager.
 
-    A worker is forked (``multiprocessing``'s fork context: no helper process such as a resource tracker) when
-    the command starts, before the run loads its FMU or compiled kernels (one thread, numba not imported: checked
-    when this was written); it inherits the modules imported so far (numpy), so it imports only matplotlib (and
-    the numpy-only spline). Jobs and answers are pickled over a pipe, but for the columns of ``ColumnsOf`` arguments
-    and of a RunResult answer (raw bytes)."""
+    The first worker is forked (``multiprocessing``'s fork context: no helper process such as a resource tracker)
+    when the command starts, before the run loads its FMU or compiled kernels (one thread, numba not imported:
+    checked when this was written); it inherits the modules imported so far (numpy), imports only matplotlib (and
+    the numpy-only spline) and forks the second (``_forked``). ``plan`` (a ``figures.Plan``) and ``names`` (the
+    figures each worker will draw) let them prepare those figures' frames meanwhile. Jobs and answers are pickled
+    over a pipe, but for the columns of ``ColumnsOf`` arguments and of a RunResult answer (raw bytes)."""
 
-    def __init__(self, n: int = 1):
+    def __init__(self, n: int = 1, plan=None, names: tuple[tuple[str, ...], ...] = ()):
         self._procs, self._conns, self._busy = [], [], []
+        self._pids: list[int | None] = [None] * n
         ctx = multiprocessing.get_context("fork")
         for stream in (sys.stdout, sys.stderr):   # nothing buffered twice
             with contextlib.suppress(Exception):
                 stream.flush()
-        for modules in (IMPORTS, *[IMPORTS_OTHERS] * (n - 1)):
-            conn = proc = None
-            try:
-                conn, theirs = ctx.Pipe()
-                proc = ctx.Process(target=_forked, args=(theirs, conn, modules), daemon=True,
-                                   name="mechanism-output")
-                proc.start()
-                theirs.close()
-            except (OSError, ValueError):   # cannot start one: its jobs run here
-                if conn is not None:
+        pipes = []
+        try:
+            for _ in range(n):
+                pipes.append(ctx.Pipe())
+            ours, theirs = [p[0] for p in pipes], [p[1] for p in pipes]
+            proc = ctx.Process(target=_forked, args=(theirs, ours, IMPORTS, plan, tuple(names)), daemon=True,
+                               name="mechanism-output")
+            proc.start()
+        except (OSError, ValueError):   # cannot start them: their jobs run here
+            for pipe in pipes:
+                for conn in pipe:
                     conn.close()
-                conn = proc = None
-            self._procs.append(proc)
-            self._conns.append(conn)
+            pipes, proc = [], None
+        for conn in (p[1] for p in pipes):
+            conn.close()
+        for k in range(n):
+            self._procs.append(proc if k == 0 else None)   # (the second is the first's child, ended by it)
+            self._conns.append(pipes[k][0] if pipes else None)
             self._busy.append(False)
 
     def __len__(self) -> int:
@@ -295,13 +392,13 @@ class OutputWorkers:
         return True
 
     def result(self, k: int, job: str, *args, **kwargs):
-        """The answer to worker ``k``'s job (its exception raised here); if the worker died meanwhile, the
-        job (given again as ``job, args, kwargs``) runs in-process."""
+        """The answer to worker ``k``'s job (its exception raised here); if the worker died meanwhile (or gave no
+        answer within ``ANSWER_TIMEOUT_S``), the job (given again as ``job, args, kwargs``) runs in-process."""
         try:
-            status, value = self._conns[k].recv()
+            status, value = self._answer(k)
             if isinstance(value, _Columns):
                 value = _receive(self._conns[k], value)
-        except (EOFError, OSError):
+        except (EOFError, OSError, TimeoutError):
             self._lost(k)
             return _local(job, args, kwargs)
         finally:
@@ -310,14 +407,37 @@ class OutputWorkers:
             raise value
         return value
 
+    def _answer(self, k: int, what: str = "answer"):
+        """The next message from worker ``k`` (its process id, sent first, noted on the way); TimeoutError if none
+        comes within ``ANSWER_TIMEOUT_S``."""
+        conn = self._conns[k]
+        deadline = time.monotonic() + ANSWER_TIMEOUT_S
+        while True:
+            if not conn.poll(max(0.0, deadline - time.monotonic())):
+                raise TimeoutError(f"output worker {k} gave no {what} within {ANSWER_TIMEOUT_S:g} s")
+            message = conn.recv()
+            if self._pids[k] is None and isinstance(message, tuple) and message[:1] == ("pid",):
+                self._pids[k] = message[1]
+                if what == "process id":
+                    return message
+                continue
+            return message
+
+    def pid(self, k: int) -> int | None:
+        """Worker ``k``'s process id (waiting for it to start); None if it is not there."""
+        if self._pids[k] is None and self._conns[k] is not None and not self._busy[k]:
+            with contextlib.suppress(EOFError, OSError, TimeoutError):
+                self._answer(k, "process id")
+        return self._pids[k]
+
     def gather(self, k: int, part: ColumnsOf) -> bool:
         """Hand worker ``k`` a block of a streamed run's columns to keep (``_gather``), waiting for its receipt;
         False if it is not there or failed (nothing runs in-process: the caller reads the rows back instead)."""
         if not self.submit(k, "gather", part):
             return False
         try:
-            status, _ = self._conns[k].recv()
-        except (EOFError, OSError):
+            status, _ = self._answer(k)
+        except (EOFError, OSError, TimeoutError):
             self._lost(k)
             return False
         finally:
@@ -331,35 +451,35 @@ class OutputWorkers:
         return self.result(k, job, *args, **kwargs)
 
     def _lost(self, k: int) -> None:
+        """Worker ``k`` given up: its pipe closed (a worker that reads or writes it again ends), the first worker
+        ended (it ends the second too: that one's jobs then run in-process)."""
         conn, proc = self._conns[k], self._procs[k]
         self._conns[k] = self._procs[k] = None
         if conn is not None:
             conn.close()
         if proc is not None:
             proc.join(timeout=1.0)
+            _end(proc)
 
     def close(self) -> None:
-        """End every worker: one that answered its jobs is idle (or still importing) and writes nothing, so
-        it is terminated; one with a job in flight is waited for (its files are written whole)."""
-        for k, (proc, conn) in enumerate(zip(self._procs, self._conns)):
-            if proc is None:
+        """End every worker: one that answered its jobs is idle (or still importing) and writes nothing; one with a
+        job in flight is waited for (its files are written whole). The first is terminated if it has not ended at
+        once (it ends the second)."""
+        for k, conn in enumerate(self._conns):
+            if conn is None:
                 continue
             if self._busy[k]:
-                try:
-                    conn.recv()
-                except (EOFError, OSError):
-                    pass
-            try:
+                with contextlib.suppress(EOFError, OSError, TimeoutError):
+                    self._answer(k)
+                self._busy[k] = False
+            with contextlib.suppress(OSError, ValueError):
                 conn.send(None)
-            except (OSError, ValueError):
-                pass
-            if proc.is_alive():
-                proc.terminate()
-            proc.join(timeout=5.0)
-            if proc.is_alive():
-                proc.kill()
-                proc.join()
-            conn.close()
+        for k, (proc, conn) in enumerate(zip(self._procs, self._conns)):
+            if proc is not None:
+                proc.join(timeout=0.2)   # an idle first worker ends at once (after the second); one importing is ended
+                _end(proc)
+            if conn is not None:
+                conn.close()
             self._procs[k] = self._conns[k] = None
 
     def __enter__(self):
@@ -368,6 +488,16 @@ class OutputWorkers:
     def __exit__(self, *exc):
         self.close()
         return False
+
+
+def _end(proc) -> None:
+    """Terminate ``proc`` if it is alive (SIGTERM: the first worker ends the second too), kill it if that fails."""
+    if proc.is_alive():
+        proc.terminate()
+        proc.join(timeout=5.0)
+    if proc.is_alive():
+        proc.kill()
+        proc.join()
 
 
 class ForkedSaves:
