@@ -324,7 +324,7 @@ def exit_now(code: int) -> None:
             stream.flush()
         except (OSError, ValueError):   # a closed pipe: nothing more to write there
             pass
-    os._exit(code if isinstance(code, int) else 1)
+    os._exit(0 if code is None else code if isinstance(code, int) else 1)    # sys.exit's meaning of None
 
 
 if __name__ == "__main__":
