@@ -15,8 +15,13 @@ import math
 import numpy as np
 from numba import njit
 
-from fmu_bearing.ball_bearing import FILM_LOAD_EXPONENT, FILM_SPEED_EXPONENT, BallBearing
+from fmu_bearing.ball_bearing import (
+    FILM_LOAD_EXPONENT,
+    FILM_SPEED_EXPONENT,
+    BallBearing,
+)
 from fmu_bearing.parameters import DAMPING_CONSTANT, DAMPING_OIL_FILM
+from mechanism.multibody.kernels import LEAF
 
 #: P = [n_balls, K, P_d/2, model, C, entrainment, pre_i, h_i, pre_o, h_o, h_min, w_inner, w_outer, cos, sin, cos^2, cos sin, sin^2 (n_balls each)]
 HEADER = 13
@@ -34,29 +39,31 @@ def pack_bearing(bearing: BallBearing) -> np.ndarray:
     return np.array(head + [v for col in cols for v in col], np.float64)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _oil_film(P, load, speed):
     """Ball damping C [N s/m] of the inner and outer films in series (eq. 32) and dC/dW [s/m]."""
     h_min = P[10]
     w43 = load ** (4.0 / 3.0)
     wl = load ** -FILM_LOAD_EXPONENT
-    c = np.empty(2)
-    dc = np.empty(2)
-    for k in range(2):
+    ci = co = dci = dco = 0.0
+    for k in range(2):                                     # the inner (k = 0) and the outer film
         pre, h = P[6 + 2 * k], P[7 + 2 * k]
         h0 = h * speed * wl
         if h0 > h_min:
-            c[k] = pre * w43 / (h0 * h0 * h0)
-            dc[k] = c[k] * (4.0 / 3.0 + 3.0 * FILM_LOAD_EXPONENT) / load
+            c = pre * w43 / (h0 * h0 * h0)
+            dc = c * (4.0 / 3.0 + 3.0 * FILM_LOAD_EXPONENT) / load
         else:
-            c[k] = pre * w43 / (h_min ** 3)
-            dc[k] = c[k] * (4.0 / 3.0) / load
-    ci, co = c[0], c[1]
+            c = pre * w43 / (h_min ** 3)
+            dc = c * (4.0 / 3.0) / load
+        if k == 0:
+            ci, dci = c, dc
+        else:
+            co, dco = c, dc
     total = ci + co
-    return ci * co / total, (co * co * dc[0] + ci * ci * dc[1]) / (total * total)
+    return ci * co / total, (co * co * dci + ci * ci * dco) / (total * total)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, loads):
     """Per-ball loads (eq. 18) and the resultant (eq. 19) with its tangent stiffness and damping."""
     nb = int(P[0])
@@ -99,7 +106,7 @@ def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, l
         cs_ += C * crs
         ss += C * srr
         n_loaded += 1
-        if f > f_max:
+        if f > f_max:                                      # noqa: PLR1730 (a NaN is skipped, as the law)
             f_max = f
     c2, s2, cs2 = c * c, s * s, c * s                      # F = R f, K = R k R^T (eq. 19)
     out[0] = c * fx - s * fy
@@ -114,7 +121,7 @@ def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, l
     out[9] = f_max
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def elastic_energy(P, e_x, e_y, cage_angle):
     """Strain energy of the loaded contacts, sum of (2/5) K delta_r^2.5 [J]: ``BallBearing.elastic_energy``
     (the integral of eq. 18's Hertz term) with the same arithmetic (ball angles of eq. 17)."""

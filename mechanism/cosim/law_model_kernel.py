@@ -20,11 +20,15 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from fmu_bearing.parameters import DAMPING_CONSTANT
 from mechanism.cosim.law_kernel import evaluate
 from mechanism.multibody.kernels import (
+    LEAF,
+    _applied,
+    _kinematics,
     _layout,
     _link_inputs,
     _rotations,
@@ -43,13 +47,13 @@ LM_FIELDS = ("t", "h", "cage", "omega", "wi", "wo", "c0_x", "c0_y", "c1_x", "c1_
 LM_SIZE = len(LM_FIELDS)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _eig_max(a, b, c):
     """Largest eigenvalue of [[a, b], [b, c]] (``law_model._eig_max``)."""
     return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def law(LM, P, out, loads, s, e_x, e_y, v_x, v_y):
     """``LawModel._law``: F_law(e, v; phi_n + omega_m s) [N] (eq. 18-19) into out; keeps the stiffest tangent."""
     evaluate(P, e_x, e_y, v_x, v_y, LM[2] + LM[3] * s, LM[4], LM[5], out, loads)
@@ -61,7 +65,7 @@ def law(LM, P, out, loads, s, e_x, e_y, v_x, v_y):
     return out[0], out[1]
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def set_cage(LM, P, cage, omega_inner, omega_outer):
     """``LawModel.set_cage``: phi_n [rad], omega_m (eq. 16) and the ring speeds [rad/s] at t_n."""
     LM[2] = cage
@@ -69,7 +73,7 @@ def set_cage(LM, P, cage, omega_inner, omega_outer):
     LM[4], LM[5] = omega_inner, omega_outer
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def begin(LM, P, out, loads, a, x, have_trial, h):
     """``LawModel.begin_step`` from the start exchange a (13 fields of ``Exchanged``) and, if ``have_trial``, the
     last pass's end exchange x: a new step's stiffest tangent (the start's, the law at the predicted end), c_n
@@ -90,7 +94,7 @@ def begin(LM, P, out, loads, a, x, have_trial, h):
     LM[1] = h
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def substep_tangent(LM, a, xs):
     """``LawModel.substep_tangent`` into xs: the start exchange a with the stiffest tangent met, K scaled by
     ``resolution``^2 and C by ``resolution``."""
@@ -103,7 +107,7 @@ def substep_tangent(LM, a, xs):
         xs[10 + i] = r * LM[14 + i]
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def at_least(LM, m, cap):
     """``LawModel.set_substeps``' count: m, at least ``min_substeps`` (at most cap) once the law met a contact."""
     if LM[10] > 0.0 and m < LM[19]:
@@ -111,7 +115,7 @@ def at_least(LM, m, cap):
     return m
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def end_mismatch(LM, P, out, loads, b):
     """``LawModel.end_mismatch`` on the first pass: the end exchange b's force against the law there plus c_n."""
     evaluate(P, b[1], b[2], b[3], b[4], LM[2] + LM[3] * (b[0] - LM[0]), LM[4], LM[5], out, loads)
@@ -129,7 +133,7 @@ def any_onset(LM, P, m, bounds, end, onsets):
     return False
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def onset_fraction(da, db, ma, mb):
     """``law_model.onset_fraction``: the root theta in (0, 1] of the cubic Hermite interpolant of a ball's deflection
     through (da, ma) at the substep's start and (db, mb) at its end (slopes per substep), da <= 0 < db."""
@@ -149,7 +153,7 @@ def onset_fraction(da, db, ma, mb):
     return theta
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def onset_weights(theta, j, d):
     """``law_model.onset_weights``: (g0, g1) [N] of the correction g0 + g1 sigma over a substep (sigma = 0, 1/2,
     1/2, 1 at RK4's stages) for a ball force switched on at theta with the value j and the slope d per substep."""
@@ -175,6 +179,7 @@ def onset_corrections(LM, P, m, bounds, end, onsets):
     nb = int(P[0])
     C, half, hs, om = P[4], P[2], LM[1] / m, LM[3]
     spacing = 2.0 * math.pi / nb
+    trig = np.zeros((nb, 2))          # cos, sin of each ball's angle at the substep's end (the next one's start)
     for k in range(m):
         if k + 1 < m:
             bx, by, bvx, bvy = bounds[k + 1, 0], bounds[k + 1, 1], bounds[k + 1, 2], bounds[k + 1, 3]
@@ -184,8 +189,12 @@ def onset_corrections(LM, P, m, bounds, end, onsets):
         pa, pb = LM[2] + om * k * hs, LM[2] + om * (k + 1) * hs
         g0x = g0y = g1x = g1y = 0.0
         for r in range(nb):
-            ca, sa = math.cos(pa + r * spacing), math.sin(pa + r * spacing)
+            if k == 0:
+                ca, sa = math.cos(pa + r * spacing), math.sin(pa + r * spacing)
+            else:    # substep k's start angle is substep k - 1's end angle, the same float (om * k * hs)
+                ca, sa = trig[r, 0], trig[r, 1]
             cb, sb = math.cos(pb + r * spacing), math.sin(pb + r * spacing)
+            trig[r, 0], trig[r, 1] = cb, sb
             da, db = ax * ca + ay * sa - half, bx * cb + by * sb - half
             if not (da <= 0.0 and 0.0 < db):
                 continue
@@ -206,7 +215,7 @@ def onset_corrections(LM, P, m, bounds, end, onsets):
             onsets[k, 0], onsets[k, 1], onsets[k, 2], onsets[k, 3], onsets[k, 4] = g0x, g0y, g1x, g1y, 1.0
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def force(LM, P, out, loads, onsets, bounds, tau, e_x, e_y, v_x, v_y, sub, stage):
     """``LawModel.force`` at RK4 stage ``stage`` of substep ``sub``: the law, the onset correction, the ramp of
     the end corrections; records the substep's start state (stage 0)."""
@@ -225,11 +234,20 @@ def force(LM, P, out, loads, onsets, bounds, tau, e_x, e_y, v_x, v_y, sub, stage
 def advance(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R, L, LR, W, u, acc, p1, stages):
     """``kernels.advance`` (same arithmetic, the energy account's stages and powers) with the law-model's force
     at every stage, the first included (the master's RK4 calls ``force`` four times per substep)."""
+    y = y.copy()
+    drift, finite = _substeps(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R, L, LR, W, u, acc,
+                              stages)
+    return y, drift, finite
+
+
+@njit(**LEAF)
+def _substeps(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R, L, LR, W, u, acc, stages):
+    """``advance``'s substeps on y in place (allocating nothing: no reference counting around its calls); returns
+    the end state's max |Phi| and whether it is finite."""
     N = y.shape[0]
     ork = _layout(I)[9]                  # in W: the four stages' dy/dt, the stage state, the stages' powers
     yt = W[ork + 4 * N:ork + 5 * N]
     opw = ork + 5 * N
-    y = y.copy()
     h2 = 0.5 * hs
     nb = I[0]
     for sub in range(substeps):
@@ -246,7 +264,10 @@ def advance(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R,
                 o = ork + (st - 1) * N
                 for i in range(N):
                     yt[i] = y[i] + cs * W[o + i]
-            stage_inputs(yt, I, R, L, LR, W, u)
+            if st == 0 and sub > 0 and L[0] == 1:
+                _applied(I, R, W)         # the rotations and inputs of y: the last substep's end left them
+            else:
+                stage_inputs(yt, I, R, L, LR, W, u)
             fx, fy = force(LM, P, out, loads, onsets, bounds, ts, u[0], u[1], u[2], u[3], sub, st)
             stage_derivative(ts, yt, fx, fy, I, R, L, LR, W, u, k)
             o = opw + 3 * st
@@ -263,7 +284,10 @@ def advance(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R,
         _stage_row(stages, 5 * sub + 4, y, u, nb, L)
     for i in range(N):
         if not math.isfinite(y[i]):
-            return y, math.nan, False
-    prepare(y, t_end, I, R, L, LR, W, u)
-    return y, max_violation(I, W), True
+            return math.nan, False
+    if L[0] == 1 and substeps > 0:     # ``prepare`` but the rotations and inputs of y, there since the last substep
+        _kinematics(y, t_end, I, R, W)
+    else:
+        prepare(y, t_end, I, R, L, LR, W, u)
+    return max_violation(I, W), True
 

@@ -50,6 +50,11 @@ import math
 import numpy as np
 from numba import njit
 
+#: the options of the kernels that allocate nothing: compiled without numba's reference counting (``_nrt``), so
+#: that a call passes its arrays without the atomic increments and decrements around it (a tenth of the law-model
+#: step's time when they were counted; the arithmetic is the same)
+LEAF = {"cache": True, "_nrt": False}
+
 H_I = 8   # header length of I
 H_D = 16  # length of the directory of the sparsity lists in I
 H_R = 2   # header length of R
@@ -131,7 +136,7 @@ def workspace_size(ints: np.ndarray) -> int:
     return m * n + 5 * m + m * m + 2 * n + 2 * (nb + 1) + 10 * n + 12
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _layout(I):
     """Offsets in W: (phi, gamma, rhs, lambda, Phi_t, S, Q, M^-1 Q, cos/sin, RK4 stages); Phi_q is at 0."""
     nb, n, m = I[0], I[1], I[2]
@@ -143,7 +148,7 @@ def _layout(I):
 
 
 # ---------------------------------------------------------------------------------- kinematics
-@njit(cache=True)
+@njit(**LEAF)
 def _rotations(y, I, W):
     """cos and sin of every body's angle (ground: 1, 0) into W, once per state."""
     nb = I[0]
@@ -156,7 +161,7 @@ def _rotations(y, I, W):
     W[o + 2 * nb + 1] = 0.0
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _body_point(y, n, nb, b, sx, sy, c, s):
     """(omega, u_x, u_y, x, y, xd, yd): u = A s' of a point on body b (eq. 10) and the body's state
     (q = y[:n], qd = y[n:]), given c, s = cos, sin of its angle; ground (b = nb): u = s', the rest 0."""
@@ -165,7 +170,7 @@ def _body_point(y, n, nb, b, sx, sy, c, s):
     return y[n + 3 * b + 2], c * sx - s * sy, s * sx + c * sy, y[3 * b], y[3 * b + 1], y[n + 3 * b], y[n + 3 * b + 1]
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _kinematics(y, t, I, R, W):
     """Phi (eq. 3), Phi_q, gamma (eq. 5) and Phi_t (eq. 4) of the state y = [q, qd] in internal row order,
     written in W; the rotations (``_rotations``) of y must be in W."""
@@ -238,7 +243,7 @@ def _kinematics(y, t, I, R, W):
             W[o + 3 * i + 2] -= 1.0
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _cholesky_solve(I, W, oS, ob):
     """Solve S x = b in place in b (S: the lower triangle of W[oS:oS + m m], row-major, symmetric positive
     semidefinite, overwritten by its factor L; b = W[ob:ob + m]), visiting only the entries of L's pattern
@@ -302,7 +307,7 @@ def _cholesky_solve(I, W, oS, ob):
     return dropped
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _solve(y, I, R, W, dy):
     """Eq. (9) with Baumgarte's gamma* for the kinematics and Q in W: qdd into dy[n:] and lambda (internal
     order) in W. (Phi_q M^-1 Phi_q^T) lam = Phi_q M^-1 Q - gamma*, qdd = M^-1 (Q - Phi_q^T lam)."""
@@ -358,7 +363,7 @@ def accelerations(q, qd, t, Q, I, R, W, qdd):
         qdd[i] = dy[n + i]
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _in_model_order(I, W, offset, out):
     """The constraint rows of W from ``offset`` (kernel row order) into ``out`` in model order."""
     otm = H_I + 3 * I[3] + 2 * I[4]
@@ -372,13 +377,13 @@ def multipliers(I, W, lam_model):
     _in_model_order(I, W, _layout(I)[3], lam_model)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def constraints(I, W, phi_model):
     """Phi of the last kinematics evaluation, in model order."""
     _in_model_order(I, W, _layout(I)[0], phi_model)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def max_violation(I, W):
     """max |Phi| of the last kinematics evaluation [m or rad]."""
     ophi = _layout(I)[0]
@@ -391,14 +396,14 @@ def max_violation(I, W):
 
 
 # ---------------------------------------------------------------------------------- force joint
-@njit(cache=True)
+@njit(**LEAF)
 def _point(y, n, nb, b, sx, sy, W, ocs):
     """(x, y, xd, yd) of a point s' on body b (eq. 10-12) with the body's cos, sin in W; ground: (s', 0)."""
     w, ux, uy, x, yy, xd, yd = _body_point(y, n, nb, b, sx, sy, W[ocs + 2 * b], W[ocs + 2 * b + 1])
     return x + ux, yy + uy, xd - w * uy, yd + w * ux
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _link_inputs(y, I, L, LR, W, u):
     """The bearing's inputs (e_x, e_y, v_x, v_y, omega_inner, omega_outer) of y, eq. (10)-(12), into u;
     the rotations of y (``_rotations``) must be in W."""
@@ -415,7 +420,7 @@ def _link_inputs(y, I, L, LR, W, u):
     u[5] = y[n + 3 * hb + 2] if hb < nb else 0.0
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _add_point_force(W, oQ, y, nb, b, fx, fy, ax, ay):
     """Generalized force of F = (fx, fy) applied at (ax, ay) on body b into Q = W[oQ:] (eq. 20-23)."""
     if b >= nb:
@@ -426,7 +431,7 @@ def _add_point_force(W, oQ, y, nb, b, fx, fy, ax, ay):
     W[oQ + i + 2] += (ax - y[i]) * fy - (ay - y[i + 1]) * fx
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _add_link_force(y, I, L, LR, W, ex, ey, fx, fy):
     """Generalized forces of F on the housing body and -F on the journal body into Q in W, eq. (20)-(23);
     the rotations of y (``_rotations``) must be in W."""
@@ -576,8 +581,15 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc
                     if L[0] == 1:
                         _rotations(y, I, W)
                         _link_inputs(y, I, L, LR, W, u)
-            else:
-                rhs(ts, yt, fm, I, R, L, LR, W, u, k)
+            else:                                          # ``rhs``, one call site of its parts: inlined once
+                if st == 0 and sub > 0 and account and L[0] == 1:
+                    _applied(I, R, W)                      # the rotations and inputs of y: the last substep's end
+                else:
+                    stage_inputs(yt, I, R, L, LR, W, u)
+                fx = fy = 0.0
+                if L[0] == 1:
+                    fx, fy = force_of_model(fm, ts, u[0], u[1], u[2], u[3])
+                stage_derivative(ts, yt, fx, fy, I, R, L, LR, W, u, k)
                 if account:
                     o = opw + 3 * st
                     W[o], W[o + 1], W[o + 2] = powers(yt, I, R, W)
@@ -599,12 +611,15 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc
             finite = False
             break
     if finite:
-        prepare(y, t_end, I, R, L, LR, W, u)
+        if account and L[0] == 1 and substeps > 0:         # ``prepare`` but the rotations and inputs of y, there
+            _kinematics(y, t_end, I, R, W)                  # since the last substep's end
+        else:
+            prepare(y, t_end, I, R, L, LR, W, u)
         return y, max_violation(I, W), True
     return y, math.nan, False
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def prepare(y, t, I, R, L, LR, W, u):
     """Kinematics of the state y at t into W and its bearing inputs into u (the tail of ``advance``)."""
     _rotations(y, I, W)
@@ -613,7 +628,7 @@ def prepare(y, t, I, R, L, LR, W, u):
         _link_inputs(y, I, L, LR, W, u)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t, cv, react, p1=None):
     """dy/dt = [qd, qdd] and lambda (model order) at the end state y whose kinematics ``advance``
     (or ``prepare``) left in W (and its bearing inputs in u), with the exchanged force (fx, fy) at
