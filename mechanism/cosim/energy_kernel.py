@@ -28,7 +28,7 @@ from numba import njit
 from fmu_bearing.ball_bearing import FILM_SPEED_EXPONENT
 from fmu_bearing.parameters import DAMPING_CONSTANT, DAMPING_OIL_FILM
 from mechanism.cosim.law_kernel import HEADER, _oil_film
-from mechanism.multibody.kernels import LEAF
+from mechanism.multibody.kernels import LEAF, _u
 
 #: the RK4 weights of the four stages (times h/6)
 _WEIGHTS = (1.0, 2.0, 2.0, 1.0)
@@ -56,7 +56,7 @@ def _row_powers(P, stages, row, j, cage_offset, nb, K, half, constant, oil, w_in
     speed = (P[5] * abs(wi - wo)) ** FILM_SPEED_EXPONENT if oil else 0.0
     cage_power = 0.0
     for r in range(nb):
-        cr, sr = P[HEADER + r], P[HEADER + nb + r]
+        cr, sr = P[_u(HEADER + r)], P[_u(HEADER + nb + r)]
         delta = ex * cr + ey * sr - half
         vr = vx * cr + vy * sr
         dl[j, r] = delta

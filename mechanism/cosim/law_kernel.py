@@ -21,7 +21,7 @@ from fmu_bearing.ball_bearing import (
     BallBearing,
 )
 from fmu_bearing.parameters import DAMPING_CONSTANT, DAMPING_OIL_FILM
-from mechanism.multibody.kernels import LEAF
+from mechanism.multibody.kernels import LEAF, _u
 
 #: P = [n_balls, K, P_d/2, model, C, entrainment, pre_i, h_i, pre_o, h_o, h_min, w_inner, w_outer, cos, sin, cos^2, cos sin, sin^2 (n_balls each)]
 HEADER = 13
@@ -78,10 +78,10 @@ def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, l
     fx = fy = kxx = kxy = kyy = cc = cs_ = ss = 0.0
     n_loaded, f_max = 0, 0.0
     for r in range(nb):
-        cr, sr = P[HEADER + r], P[HEADER + nb + r]
+        cr, sr = P[_u(HEADER + r)], P[_u(HEADER + nb + r)]
         delta = ex * cr + ey * sr - half
         if delta <= 0.0:
-            loads[r] = 0.0
+            loads[_u(r)] = 0.0
             continue
         root = math.sqrt(delta)
         w = K * delta * root                               # Hertz, eq. (18)
@@ -93,10 +93,10 @@ def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, l
             kt = 1.5 * K * root
         f = w + C * vr
         if f <= 0.0:                                       # a contact cannot pull
-            loads[r] = 0.0
+            loads[_u(r)] = 0.0
             continue
-        loads[r] = f
-        crr, crs, srr = P[HEADER + 2 * nb + r], P[HEADER + 3 * nb + r], P[HEADER + 4 * nb + r]
+        loads[_u(r)] = f
+        crr, crs, srr = P[_u(HEADER + 2 * nb + r)], P[_u(HEADER + 3 * nb + r)], P[_u(HEADER + 4 * nb + r)]
         fx += f * cr
         fy += f * sr
         kxx += kt * crr

@@ -33,6 +33,7 @@ from mechanism.multibody.kernels import (
     _link_inputs,
     _rotations,
     _stage_row,
+    _u,
     max_violation,
     powers,
     prepare,
@@ -257,13 +258,13 @@ def _substeps(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, 
             if st == 0:
                 ts = t
                 for i in range(N):
-                    yt[i] = y[i]
+                    yt[_u(i)] = y[_u(i)]
             else:
                 cs = h2 if st < 3 else hs                  # y + h/2 k1, y + h/2 k2, y + h k3
                 ts = t + cs
                 o = ork + (st - 1) * N
                 for i in range(N):
-                    yt[i] = y[i] + cs * W[o + i]
+                    yt[_u(i)] = y[_u(i)] + cs * W[_u(o + i)]
             if st == 0 and sub > 0 and L[0] == 1:
                 _applied(I, R, W)         # the rotations and inputs of y: the last substep's end left them
             else:
@@ -271,13 +272,14 @@ def _substeps(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, 
             fx, fy = force(LM, P, out, loads, onsets, bounds, ts, u[0], u[1], u[2], u[3], sub, st)
             stage_derivative(ts, yt, fx, fy, I, R, L, LR, W, u, k)
             o = opw + 3 * st
-            W[o], W[o + 1], W[o + 2] = powers(yt, I, R, W)
+            W[_u(o)], W[_u(o + 1)], W[_u(o + 2)] = powers(yt, I, R, W)
             _stage_row(stages, 5 * sub + st, yt, u, nb, L)
         c = hs / 6.0
         for i in range(N):
-            y[i] = y[i] + c * (W[ork + i] + 2.0 * (W[ork + N + i] + W[ork + 2 * N + i]) + W[ork + 3 * N + i])
+            y[_u(i)] = y[_u(i)] + c * (W[_u(ork + i)] + 2.0 * (W[_u(ork + N + i)] + W[_u(ork + 2 * N + i)])
+                                       + W[_u(ork + 3 * N + i)])
         for j in range(3):
-            acc[j] += c * (W[opw + j] + 2.0 * (W[opw + 3 + j] + W[opw + 6 + j]) + W[opw + 9 + j])
+            acc[j] += c * (W[_u(opw + j)] + 2.0 * (W[_u(opw + 3 + j)] + W[_u(opw + 6 + j)]) + W[_u(opw + 9 + j)])
         if L[0] == 1:
             _rotations(y, I, W)
             _link_inputs(y, I, L, LR, W, u)
