@@ -20,11 +20,10 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from fmu_bearing.parameters import DAMPING_CONSTANT
-from mechanism.cosim.law_kernel import evaluate
+from mechanism.cosim.law_kernel import HEADER, evaluate
 from mechanism.multibody.kernels import (
     LEAF,
     _applied,
@@ -123,7 +122,7 @@ def end_mismatch(LM, P, out, loads, b):
     return b[5] - (out[0] + LM[6]), b[6] - (out[1] + LM[7])
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def any_onset(LM, P, m, bounds, end, onsets):
     """``LawModel.end_mismatch``'s condition: a contact onset to correct in this pass's substeps (``onsets`` is
     overwritten: the next pass builds its own)."""
@@ -167,7 +166,7 @@ def onset_weights(theta, j, d):
     return 6.0 * b - 2.0 * a, 6.0 * a - 12.0 * b
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def onset_corrections(LM, P, m, bounds, end, onsets):
     """``LawModel._onset_corrections`` into onsets[:m] (g0_x, g0_y, g1_x, g1_y, present): per substep the force
     g0 + g1 sigma that gives RK4 each contact onset's exact impulse and first moment (eq. 18), from the last
@@ -180,7 +179,13 @@ def onset_corrections(LM, P, m, bounds, end, onsets):
     nb = int(P[0])
     C, half, hs, om = P[4], P[2], LM[1] / m, LM[3]
     spacing = 2.0 * math.pi / nb
-    trig = np.zeros((nb, 2))          # cos, sin of each ball's angle at the substep's end (the next one's start)
+    # A ball's deflection at a substep's bound, first from the bound's cage angle rotated onto the ball's place (the
+    # law's table: cos, sin of 2 pi r / nb, eq. 17), one cos and sin per bound: within |e| 1e-15 (8 + |angle|) of
+    # the exact one below (the rounding of the angles and of a few products), far inside ``tol``. A ball clearly
+    # loaded at the substep's start or clearly unloaded at its end has no onset there (the exact da, db have the
+    # same signs) and needs no trig of its own; the others are decided by the exact arithmetic, as before.
+    pb = LM[2]
+    cb0, sb0 = math.cos(pb), math.sin(pb)
     for k in range(m):
         if k + 1 < m:
             bx, by, bvx, bvy = bounds[k + 1, 0], bounds[k + 1, 1], bounds[k + 1, 2], bounds[k + 1, 3]
@@ -188,14 +193,19 @@ def onset_corrections(LM, P, m, bounds, end, onsets):
             bx, by, bvx, bvy = end[1], end[2], end[3], end[4]
         ax, ay, avx, avy = bounds[k, 0], bounds[k, 1], bounds[k, 2], bounds[k, 3]
         pa, pb = LM[2] + om * k * hs, LM[2] + om * (k + 1) * hs
+        ca0, sa0 = cb0, sb0
+        cb0, sb0 = math.cos(pb), math.sin(pb)
+        xa, ya = ax * ca0 + ay * sa0, ay * ca0 - ax * sa0          # e in the cage's frame at both bounds
+        xb, yb = bx * cb0 + by * sb0, by * cb0 - bx * sb0
+        tol_a = 1e-12 * (half + (abs(ax) + abs(ay)) * (8.0 + abs(pa)))
+        tol_b = 1e-12 * (half + (abs(bx) + abs(by)) * (8.0 + abs(pb)))
         g0x = g0y = g1x = g1y = 0.0
         for r in range(nb):
-            if k == 0:
-                ca, sa = math.cos(pa + r * spacing), math.sin(pa + r * spacing)
-            else:    # substep k's start angle is substep k - 1's end angle, the same float (om * k * hs)
-                ca, sa = trig[r, 0], trig[r, 1]
+            cr, sr = P[_u(HEADER + r)], P[_u(HEADER + nb + r)]
+            if xa * cr + ya * sr - half > tol_a or xb * cr + yb * sr - half < -tol_b:
+                continue                                            # loaded at the start, or unloaded at the end
+            ca, sa = math.cos(pa + r * spacing), math.sin(pa + r * spacing)
             cb, sb = math.cos(pb + r * spacing), math.sin(pb + r * spacing)
-            trig[r, 0], trig[r, 1] = cb, sb
             da, db = ax * ca + ay * sa - half, bx * cb + by * sb - half
             if not (da <= 0.0 and 0.0 < db):
                 continue
@@ -221,12 +231,13 @@ def force(LM, P, out, loads, onsets, bounds, tau, e_x, e_y, v_x, v_y, sub, stage
     """``LawModel.force`` at RK4 stage ``stage`` of substep ``sub``: the law, the onset correction, the ramp of
     the end corrections; records the substep's start state (stage 0)."""
     s = tau - LM[0]
+    q = _u(sub)
     fx, fy = law(LM, P, out, loads, s, e_x, e_y, v_x, v_y)
     if stage == 0:
-        bounds[sub, 0], bounds[sub, 1], bounds[sub, 2], bounds[sub, 3] = e_x, e_y, v_x, v_y
-    if onsets[sub, 4] != 0.0:
+        bounds[q, 0], bounds[q, 1], bounds[q, 2], bounds[q, 3] = e_x, e_y, v_x, v_y
+    if onsets[q, 4] != 0.0:
         sigma = 0.0 if stage == 0 else (1.0 if stage == 3 else 0.5)
-        fx, fy = fx + (onsets[sub, 0] + onsets[sub, 2] * sigma), fy + (onsets[sub, 1] + onsets[sub, 3] * sigma)
+        fx, fy = fx + (onsets[q, 0] + onsets[q, 2] * sigma), fy + (onsets[q, 1] + onsets[q, 3] * sigma)
     r = s / LM[1]
     return fx + LM[6] + r * (LM[8] - LM[6]), fy + LM[7] + r * (LM[9] - LM[7])
 

@@ -539,10 +539,11 @@ def powers(y, I, R, W):
 @njit(cache=True, inline="always")
 def _stage_row(stages, row, y, u, nb, L):
     """The energy account's record of a stage state: its bearing inputs u and the ring angles (journal, housing)."""
+    q = _u(row)
     for i in range(6):
-        stages[row, i] = u[i]
-    stages[row, 6] = y[3 * L[2] + 2] if L[2] < nb else 0.0
-    stages[row, 7] = y[3 * L[1] + 2] if L[1] < nb else 0.0
+        stages[q, i] = u[i]
+    stages[q, 6] = y[3 * L[2] + 2] if L[2] < nb else 0.0
+    stages[q, 7] = y[3 * L[1] + 2] if L[1] < nb else 0.0
 
 
 @njit(cache=True)
