@@ -127,8 +127,16 @@ def elastic_energy(P, e_x, e_y, cage_angle):
     (the integral of eq. 18's Hertz term) with the same arithmetic (ball angles of eq. 17)."""
     nb = int(P[0])
     K, half = P[1], P[2]
+    # a ball clearly unloaded adds nothing: settled from e in the cage's frame and the table of the balls' places
+    # (cos, sin of 2 pi r / nb), within |e| 1e-15 (8 + |angle|) of the exact deflection, far inside tol; the
+    # others with the exact arithmetic, as before
+    c, s = math.cos(cage_angle), math.sin(cage_angle)
+    ex, ey = c * e_x + s * e_y, c * e_y - s * e_x
+    tol = 1e-12 * (half + (abs(e_x) + abs(e_y)) * (8.0 + abs(cage_angle)))
     total = 0.0
     for r in range(nb):
+        if ex * P[_u(HEADER + r)] + ey * P[_u(HEADER + nb + r)] - half < -tol:
+            continue
         phi = cage_angle + 2.0 * math.pi * r / nb
         delta = e_x * math.cos(phi) + e_y * math.sin(phi) - half
         if delta > 0:
