@@ -136,12 +136,11 @@ def workspace_size(ints: np.ndarray) -> int:
     return m * n + 5 * m + m * m + 2 * n + 2 * (nb + 1) + 10 * n + 12
 
 
-@njit(cache=True, inline="always")
-def _u(i):
-    """The index i (never negative here) as unsigned: numba then indexes an array without the wraparound of a
-    negative index (a shift, a mask and an add on every access; half the time of ``_solve`` where they were
-    counted). The hot kernels index with it; the values read and written are the same."""
-    return np.uint64(i)
+#: an index (never negative here) as unsigned, ``_u(i)``: numba then indexes an array without the wraparound of a
+#: negative index (a shift, a mask and an add on every access; half the time of ``_solve`` where they were counted).
+#: The hot kernels index with it; the values read and written are the same. A cast, not a function: nothing to
+#: inline (an ``inline="always"`` helper at each of its call sites cost seconds of the first run's compile).
+_u = np.uint64
 
 
 @njit(**LEAF)
