@@ -180,6 +180,35 @@ def test_onset_jumps_match_the_scheme():
     assert found > 50
 
 
+def test_onset_jumps_match_the_scheme_at_the_load_zones_edge():
+    """``compiled_loop.onset_jumps`` (which settles the balls far from the load zone's edge from one cos and sin per
+    end) against ``coupling.implicit.onset_jumps`` bit for bit where it matters: e at the clearance at both ends
+    (balls entering and leaving the load zone), cage angles up to 1e4 rad."""
+    bearing = BallBearing(BearingParameters(damping_model=1, damping_coefficient=50.0))
+    P = pack_bearing(bearing)
+    rng = np.random.default_rng(6)
+    half = bearing.half_clearance
+    jumps = np.zeros((bearing.n_balls, 3))
+    found = 0
+    for trial in range(2000):
+        phase, radius = rng.uniform(0, 2 * math.pi), half * (1 + rng.normal(0, 0.05))
+        ends = [(radius * (1 + rng.normal(0, 0.02)), phase + rng.normal(0, 0.1)) for _ in range(2)]
+        v = rng.normal(0.0, 0.05, 4)
+        a = Exchanged(0.0, ends[0][0] * math.cos(ends[0][1]), ends[0][0] * math.sin(ends[0][1]), v[0], v[1], 0.0, 0.0)
+        b = Exchanged(1e-5, ends[1][0] * math.cos(ends[1][1]), ends[1][0] * math.sin(ends[1][1]), v[2], v[3], 0.0,
+                      0.0)
+        cage_a = rng.uniform(-7, 7) if trial % 2 else rng.uniform(-1e4, 1e4)
+        cage_b = cage_a + rng.normal(0, 0.01)
+        expected = onset_jumps(bearing, a, cage_a, b, cage_b)
+        xa = np.array([a.t, a.e_x, a.e_y, a.v_x, a.v_y] + [0.0] * 8)
+        xb = np.array([b.t, b.e_x, b.e_y, b.v_x, b.v_y] + [0.0] * 8)
+        count = compiled_loop.onset_jumps(P, xa, cage_a, xb, cage_b, jumps)
+        assert count == len(expected), trial
+        assert [tuple(row) for row in jumps[:count]] == [tuple(j) for j in expected], trial
+        found += count
+    assert found > 100
+
+
 @pytest.mark.parametrize("with_law, options", [(False, {}), (True, {}),
                                                (True, {"iterate_where_needed": False, "max_iterations": 3})])
 def test_without_energy_account(with_law, options):

@@ -133,6 +133,39 @@ def test_stage_integrals_match_the_law_at_one_state():
             assert Wc == pytest.approx(hs * c_power, abs=1e-9 * max(abs(c_power), 1e-3) * hs), (model, Wc)
 
 
+def test_stage_integrals_reuse_a_substeps_end_row_as_the_next_start():
+    """A substep's start row equal to the last substep's end row (as the integrators record them) is not evaluated
+    again (``energy_kernel.stage_integrals`` takes that row's powers from the end): the integrals over m substeps
+    are those of the m substeps integrated one by one (each its own call, every row evaluated), to rounding of
+    the sums, for constant and oil-film damping, with onsets and releases inside the substeps."""
+    stage_integrals, pack = _stage_kernel()
+    rng = np.random.default_rng(7)
+    for model in (1, 2):
+        bearing = BallBearing(BearingParameters(damping_model=model, damping_coefficient=50.0))
+        P = pack(bearing)
+        half = bearing.half_clearance
+        for _ in range(10):
+            m, hs = int(rng.integers(2, 6)), 1e-5
+            states = []                        # the substeps' ends (m + 1) and the stage states between them
+            phase, radius = rng.uniform(0, 2 * math.pi), half * rng.uniform(0.8, 2.0)
+            for k in range(m + 1):
+                a = phase + 0.3 * k
+                states.append((radius * math.cos(a), radius * math.sin(a), *rng.uniform(-0.05, 0.05, 2),
+                               rng.uniform(50, 130), rng.uniform(-5, 5), 0.01 * k, -0.002 * k))
+            rows = []
+            for k in range(m):
+                mid = [tuple(0.5 * (x + y) + rng.normal(0, 1e-7 if i < 2 else 1e-3) for i, (x, y) in
+                             enumerate(zip(states[k], states[k + 1]))) for _ in range(2)]
+                rows += [states[k], *mid, mid[1], states[k + 1]]
+            rows = np.array(rows)
+            D, Wc = stage_integrals(P, rows, m, hs, 0.3)
+            parts = [stage_integrals(P, rows[5 * k:5 * k + 5].copy(), 1, hs, 0.3) for k in range(m)]
+            D1, Wc1 = sum(p[0] for p in parts), sum(p[1] for p in parts)
+            scale = max(abs(D1), max(abs(p[0]) for p in parts), 1e-12)
+            assert abs(D - D1) <= 1e-12 * scale, (model, D, D1)
+            assert abs(Wc - Wc1) <= 1e-12 * max(abs(Wc1), max(abs(p[1]) for p in parts), 1e-12), (model, Wc, Wc1)
+
+
 def _master(t_end: float, **settings):
     """The default scheme (law-model) through the master with the energy account, in-process, 1200 rpm."""
     from mechanism.cosim.endpoints import InProcessEndpoint

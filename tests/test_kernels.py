@@ -284,6 +284,25 @@ def test_kernel_redundant_constraints_give_the_numpy_accelerations():
     assert np.allclose(J.T @ lam, J.T @ ref_lam, rtol=1e-10, atol=1e-10 * np.max(np.abs(J.T @ ref_lam)))
 
 
+def test_compiled_elastic_energy_is_ball_bearings_at_the_load_zones_edge():
+    """``law_kernel.elastic_energy`` (which settles the balls clearly out of the load zone from one cos and sin)
+    equals ``BallBearing.elastic_energy`` bit for bit with e at the clearance (balls at the load zone's edge), cage
+    angles up to 1e4 rad."""
+    bearing = BallBearing(BearingParameters())
+    P = law_kernel.pack_bearing(bearing)
+    rng = np.random.default_rng(13)
+    half = bearing.half_clearance
+    loaded = 0
+    for trial in range(3000):
+        phase, radius = rng.uniform(0, 2 * math.pi), half * (1 + rng.normal(0, 0.02))
+        ex, ey = radius * math.cos(phase), radius * math.sin(phase)
+        cage = rng.uniform(-7, 7) if trial % 2 else rng.uniform(-1e4, 1e4)
+        ref = bearing.elastic_energy(ex, ey, cage)
+        assert law_kernel.elastic_energy(P, ex, ey, cage) == ref, trial
+        loaded += ref > 0
+    assert loaded > 500
+
+
 @pytest.mark.parametrize("settings", [{}, {"n_balls": 20, "allow_ball_overlap": True}])
 def test_compiled_elastic_energy_matches_ball_bearing_and_is_the_hertz_potential(settings):
     """``law_kernel.elastic_energy`` (the energy account's V) equals ``BallBearing.elastic_energy`` to

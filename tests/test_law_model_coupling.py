@@ -191,6 +191,47 @@ def _errors(r, ref) -> tuple[float, float]:
             float(np.max(np.abs(r["cage_angle"] - ref["cage_angle"][idx]))))
 
 
+def test_compiled_onset_corrections_match_the_reference_at_the_load_zones_edge():
+    """The compiled onset corrections (``law_model_kernel.onset_corrections``, which settles the balls far from the
+    load zone's edge from one cos and sin per substep bound) against the reference
+    (``LawModel._onset_corrections``), bit for bit: random substeps with e at the clearance (balls entering and
+    leaving the load zone), cage angles up to 1e4 rad, several substep counts."""
+    from mechanism.cosim import law_model_kernel as lmk
+    from mechanism.cosim.law_kernel import pack_bearing
+    law = _law()
+    P = pack_bearing(law)
+    half = law.half_clearance
+    rng = np.random.default_rng(11)
+    onsets_seen = 0
+    for trial in range(1500):
+        m, h = int(rng.integers(1, 6)), 10 ** rng.uniform(-6, -4)
+        cage = rng.uniform(-7, 7) if trial % 2 else rng.uniform(-1e4, 1e4)
+        wi, wo = rng.uniform(-130, 130), rng.uniform(-20, 20)
+        phase, radius = rng.uniform(0, 2 * math.pi), half * (1 + rng.normal(0, 0.05))
+        points = []
+        for _ in range(m + 1):
+            a, r = phase + rng.normal(0, 0.1), radius * (1 + rng.normal(0, 0.02))
+            points.append((r * math.cos(a), r * math.sin(a), *rng.normal(0, 0.02, 2)))
+        end = Exchanged(h, *points[m], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        scheme = make_scheme("law-model")
+        scheme.bind_law(law)
+        scheme.set_cage(cage, wi, wo)
+        scheme._h_step = h
+        reference = scheme._onset_corrections(m, dict(enumerate(points[:m])), end)
+        LM = np.zeros(lmk.LM_SIZE)
+        lmk.set_cage(LM, P, cage, wi, wo)
+        LM[1] = h
+        onsets = np.full((m, 5), np.nan)
+        lmk.onset_corrections(LM, P, m, np.array(points), np.array([h, *points[m], *[0.0] * 8]), onsets)
+        for k in range(m):
+            if k in reference:
+                assert onsets[k, 4] == 1.0 and tuple(onsets[k, :4]) == reference[k], (trial, k)
+            else:
+                assert onsets[k, 4] == 0.0 and not onsets[k, :4].any(), (trial, k)
+        onsets_seen += len(reference)
+    assert onsets_seen > 100
+
+
 def test_at_1e_4_s_the_error_is_the_substeps_not_the_step(reference_fifth, monkeypatch):
     """h = 1e-4 s over the start-up (0.2 revolution at 1200 rpm, impacts and contact onsets): the law-model's
     error is its RK4 substeps' (it falls with ``resolution``), far below jacobian-implicit's at the same step.

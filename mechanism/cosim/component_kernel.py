@@ -19,6 +19,7 @@ from numba import njit
 
 from fmu_bearing.life import _CUBE_OF_STATIONARY, _TWO_PI, P_STATIONARY
 from mechanism.cosim.law_kernel import evaluate
+from mechanism.multibody.kernels import LEAF
 
 CS_CAGE, CS_INPUTS, CS_OUT, CS_LOADS = 0, 1, 7, 17
 
@@ -55,7 +56,7 @@ def unpack_state(endpoint, cs: np.ndarray) -> None:
     (life.sum_cubed_inner, life.sum_cubed_outer, life.revolutions, life.time) = cs[CS_LOADS + nb:].tolist()
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def life_add(loads, sums, z, omega_inner, omega_outer, dt):
     """``LifeAccumulator.add`` (load angular velocity 0) on ``sums`` = [sum_cubed_inner, sum_cubed_outer,
     revolutions, time] with the same arithmetic (ISO/TS 16281 cubic and (10/3)-power means, Palmgren-Miner)."""
@@ -80,7 +81,7 @@ def life_add(loads, sums, z, omega_inner, omega_outer, dt):
     sums[3] += dt
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def law_exchange(P, eccentricity_limit, cs, h, sent):
     """One exchange of the in-process component (``InProcessEndpoint.exchange``): check the inputs ``sent``,
     advance the cage over h [s] with the ring speeds held (eq. 16), evaluate the law (eq. 18-19) and add the

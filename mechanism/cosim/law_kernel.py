@@ -15,8 +15,13 @@ import math
 import numpy as np
 from numba import njit
 
-from fmu_bearing.ball_bearing import FILM_LOAD_EXPONENT, FILM_SPEED_EXPONENT, BallBearing
+from fmu_bearing.ball_bearing import (
+    FILM_LOAD_EXPONENT,
+    FILM_SPEED_EXPONENT,
+    BallBearing,
+)
 from fmu_bearing.parameters import DAMPING_CONSTANT, DAMPING_OIL_FILM
+from mechanism.multibody.kernels import LEAF, _u
 
 #: P = [n_balls, K, P_d/2, model, C, entrainment, pre_i, h_i, pre_o, h_o, h_min, w_inner, w_outer, cos, sin, cos^2, cos sin, sin^2 (n_balls each)]
 HEADER = 13
@@ -34,29 +39,31 @@ def pack_bearing(bearing: BallBearing) -> np.ndarray:
     return np.array(head + [v for col in cols for v in col], np.float64)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _oil_film(P, load, speed):
     """Ball damping C [N s/m] of the inner and outer films in series (eq. 32) and dC/dW [s/m]."""
     h_min = P[10]
     w43 = load ** (4.0 / 3.0)
     wl = load ** -FILM_LOAD_EXPONENT
-    c = np.empty(2)
-    dc = np.empty(2)
-    for k in range(2):
+    ci = co = dci = dco = 0.0
+    for k in range(2):                                     # the inner (k = 0) and the outer film
         pre, h = P[6 + 2 * k], P[7 + 2 * k]
         h0 = h * speed * wl
         if h0 > h_min:
-            c[k] = pre * w43 / (h0 * h0 * h0)
-            dc[k] = c[k] * (4.0 / 3.0 + 3.0 * FILM_LOAD_EXPONENT) / load
+            c = pre * w43 / (h0 * h0 * h0)
+            dc = c * (4.0 / 3.0 + 3.0 * FILM_LOAD_EXPONENT) / load
         else:
-            c[k] = pre * w43 / (h_min ** 3)
-            dc[k] = c[k] * (4.0 / 3.0) / load
-    ci, co = c[0], c[1]
+            c = pre * w43 / (h_min ** 3)
+            dc = c * (4.0 / 3.0) / load
+        if k == 0:
+            ci, dci = c, dc
+        else:
+            co, dco = c, dc
     total = ci + co
-    return ci * co / total, (co * co * dc[0] + ci * ci * dc[1]) / (total * total)
+    return ci * co / total, (co * co * dci + ci * ci * dco) / (total * total)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, loads):
     """Per-ball loads (eq. 18) and the resultant (eq. 19) with its tangent stiffness and damping."""
     nb = int(P[0])
@@ -71,10 +78,10 @@ def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, l
     fx = fy = kxx = kxy = kyy = cc = cs_ = ss = 0.0
     n_loaded, f_max = 0, 0.0
     for r in range(nb):
-        cr, sr = P[HEADER + r], P[HEADER + nb + r]
+        cr, sr = P[_u(HEADER + r)], P[_u(HEADER + nb + r)]
         delta = ex * cr + ey * sr - half
         if delta <= 0.0:
-            loads[r] = 0.0
+            loads[_u(r)] = 0.0
             continue
         root = math.sqrt(delta)
         w = K * delta * root                               # Hertz, eq. (18)
@@ -86,10 +93,10 @@ def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, l
             kt = 1.5 * K * root
         f = w + C * vr
         if f <= 0.0:                                       # a contact cannot pull
-            loads[r] = 0.0
+            loads[_u(r)] = 0.0
             continue
-        loads[r] = f
-        crr, crs, srr = P[HEADER + 2 * nb + r], P[HEADER + 3 * nb + r], P[HEADER + 4 * nb + r]
+        loads[_u(r)] = f
+        crr, crs, srr = P[_u(HEADER + 2 * nb + r)], P[_u(HEADER + 3 * nb + r)], P[_u(HEADER + 4 * nb + r)]
         fx += f * cr
         fy += f * sr
         kxx += kt * crr
@@ -99,7 +106,7 @@ def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, l
         cs_ += C * crs
         ss += C * srr
         n_loaded += 1
-        if f > f_max:
+        if f > f_max:                                      # noqa: PLR1730 (a NaN is skipped, as the law)
             f_max = f
     c2, s2, cs2 = c * c, s * s, c * s                      # F = R f, K = R k R^T (eq. 19)
     out[0] = c * fx - s * fy
@@ -114,14 +121,22 @@ def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, l
     out[9] = f_max
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def elastic_energy(P, e_x, e_y, cage_angle):
     """Strain energy of the loaded contacts, sum of (2/5) K delta_r^2.5 [J]: ``BallBearing.elastic_energy``
     (the integral of eq. 18's Hertz term) with the same arithmetic (ball angles of eq. 17)."""
     nb = int(P[0])
     K, half = P[1], P[2]
+    # a ball clearly unloaded adds nothing: settled from e in the cage's frame and the table of the balls' places
+    # (cos, sin of 2 pi r / nb), within |e| 1e-15 (8 + |angle|) of the exact deflection, far inside tol; the
+    # others with the exact arithmetic, as before
+    c, s = math.cos(cage_angle), math.sin(cage_angle)
+    ex, ey = c * e_x + s * e_y, c * e_y - s * e_x
+    tol = 1e-12 * (half + (abs(e_x) + abs(e_y)) * (8.0 + abs(cage_angle)))
     total = 0.0
     for r in range(nb):
+        if ex * P[_u(HEADER + r)] + ey * P[_u(HEADER + nb + r)] - half < -tol:
+            continue
         phi = cage_angle + 2.0 * math.pi * r / nb
         delta = e_x * math.cos(phi) + e_y * math.sin(phi) - half
         if delta > 0:

@@ -23,12 +23,16 @@ import math
 from numba import njit
 
 from fmu_bearing.parameters import DAMPING_CONSTANT
-from mechanism.cosim.law_kernel import evaluate
+from mechanism.cosim.law_kernel import HEADER, evaluate
 from mechanism.multibody.kernels import (
+    LEAF,
+    _applied,
+    _kinematics,
     _layout,
     _link_inputs,
     _rotations,
     _stage_row,
+    _u,
     max_violation,
     powers,
     prepare,
@@ -43,13 +47,13 @@ LM_FIELDS = ("t", "h", "cage", "omega", "wi", "wo", "c0_x", "c0_y", "c1_x", "c1_
 LM_SIZE = len(LM_FIELDS)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _eig_max(a, b, c):
     """Largest eigenvalue of [[a, b], [b, c]] (``law_model._eig_max``)."""
     return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def law(LM, P, out, loads, s, e_x, e_y, v_x, v_y):
     """``LawModel._law``: F_law(e, v; phi_n + omega_m s) [N] (eq. 18-19) into out; keeps the stiffest tangent."""
     evaluate(P, e_x, e_y, v_x, v_y, LM[2] + LM[3] * s, LM[4], LM[5], out, loads)
@@ -61,7 +65,7 @@ def law(LM, P, out, loads, s, e_x, e_y, v_x, v_y):
     return out[0], out[1]
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def set_cage(LM, P, cage, omega_inner, omega_outer):
     """``LawModel.set_cage``: phi_n [rad], omega_m (eq. 16) and the ring speeds [rad/s] at t_n."""
     LM[2] = cage
@@ -69,7 +73,7 @@ def set_cage(LM, P, cage, omega_inner, omega_outer):
     LM[4], LM[5] = omega_inner, omega_outer
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def begin(LM, P, out, loads, a, x, have_trial, h):
     """``LawModel.begin_step`` from the start exchange a (13 fields of ``Exchanged``) and, if ``have_trial``, the
     last pass's end exchange x: a new step's stiffest tangent (the start's, the law at the predicted end), c_n
@@ -90,7 +94,7 @@ def begin(LM, P, out, loads, a, x, have_trial, h):
     LM[1] = h
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def substep_tangent(LM, a, xs):
     """``LawModel.substep_tangent`` into xs: the start exchange a with the stiffest tangent met, K scaled by
     ``resolution``^2 and C by ``resolution``."""
@@ -103,7 +107,7 @@ def substep_tangent(LM, a, xs):
         xs[10 + i] = r * LM[14 + i]
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def at_least(LM, m, cap):
     """``LawModel.set_substeps``' count: m, at least ``min_substeps`` (at most cap) once the law met a contact."""
     if LM[10] > 0.0 and m < LM[19]:
@@ -111,14 +115,14 @@ def at_least(LM, m, cap):
     return m
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def end_mismatch(LM, P, out, loads, b):
     """``LawModel.end_mismatch`` on the first pass: the end exchange b's force against the law there plus c_n."""
     evaluate(P, b[1], b[2], b[3], b[4], LM[2] + LM[3] * (b[0] - LM[0]), LM[4], LM[5], out, loads)
     return b[5] - (out[0] + LM[6]), b[6] - (out[1] + LM[7])
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def any_onset(LM, P, m, bounds, end, onsets):
     """``LawModel.end_mismatch``'s condition: a contact onset to correct in this pass's substeps (``onsets`` is
     overwritten: the next pass builds its own)."""
@@ -129,7 +133,7 @@ def any_onset(LM, P, m, bounds, end, onsets):
     return False
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def onset_fraction(da, db, ma, mb):
     """``law_model.onset_fraction``: the root theta in (0, 1] of the cubic Hermite interpolant of a ball's deflection
     through (da, ma) at the substep's start and (db, mb) at its end (slopes per substep), da <= 0 < db."""
@@ -149,7 +153,7 @@ def onset_fraction(da, db, ma, mb):
     return theta
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def onset_weights(theta, j, d):
     """``law_model.onset_weights``: (g0, g1) [N] of the correction g0 + g1 sigma over a substep (sigma = 0, 1/2,
     1/2, 1 at RK4's stages) for a ball force switched on at theta with the value j and the slope d per substep."""
@@ -162,7 +166,7 @@ def onset_weights(theta, j, d):
     return 6.0 * b - 2.0 * a, 6.0 * a - 12.0 * b
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def onset_corrections(LM, P, m, bounds, end, onsets):
     """``LawModel._onset_corrections`` into onsets[:m] (g0_x, g0_y, g1_x, g1_y, present): per substep the force
     g0 + g1 sigma that gives RK4 each contact onset's exact impulse and first moment (eq. 18), from the last
@@ -175,6 +179,13 @@ def onset_corrections(LM, P, m, bounds, end, onsets):
     nb = int(P[0])
     C, half, hs, om = P[4], P[2], LM[1] / m, LM[3]
     spacing = 2.0 * math.pi / nb
+    # A ball's deflection at a substep's bound, first from the bound's cage angle rotated onto the ball's place (the
+    # law's table: cos, sin of 2 pi r / nb, eq. 17), one cos and sin per bound: within |e| 1e-15 (8 + |angle|) of
+    # the exact one below (the rounding of the angles and of a few products), far inside ``tol``. A ball clearly
+    # loaded at the substep's start or clearly unloaded at its end has no onset there (the exact da, db have the
+    # same signs) and needs no trig of its own; the others are decided by the exact arithmetic, as before.
+    pb = LM[2]
+    cb0, sb0 = math.cos(pb), math.sin(pb)
     for k in range(m):
         if k + 1 < m:
             bx, by, bvx, bvy = bounds[k + 1, 0], bounds[k + 1, 1], bounds[k + 1, 2], bounds[k + 1, 3]
@@ -182,8 +193,17 @@ def onset_corrections(LM, P, m, bounds, end, onsets):
             bx, by, bvx, bvy = end[1], end[2], end[3], end[4]
         ax, ay, avx, avy = bounds[k, 0], bounds[k, 1], bounds[k, 2], bounds[k, 3]
         pa, pb = LM[2] + om * k * hs, LM[2] + om * (k + 1) * hs
+        ca0, sa0 = cb0, sb0
+        cb0, sb0 = math.cos(pb), math.sin(pb)
+        xa, ya = ax * ca0 + ay * sa0, ay * ca0 - ax * sa0          # e in the cage's frame at both bounds
+        xb, yb = bx * cb0 + by * sb0, by * cb0 - bx * sb0
+        tol_a = 1e-12 * (half + (abs(ax) + abs(ay)) * (8.0 + abs(pa)))
+        tol_b = 1e-12 * (half + (abs(bx) + abs(by)) * (8.0 + abs(pb)))
         g0x = g0y = g1x = g1y = 0.0
         for r in range(nb):
+            cr, sr = P[_u(HEADER + r)], P[_u(HEADER + nb + r)]
+            if xa * cr + ya * sr - half > tol_a or xb * cr + yb * sr - half < -tol_b:
+                continue                                            # loaded at the start, or unloaded at the end
             ca, sa = math.cos(pa + r * spacing), math.sin(pa + r * spacing)
             cb, sb = math.cos(pb + r * spacing), math.sin(pb + r * spacing)
             da, db = ax * ca + ay * sa - half, bx * cb + by * sb - half
@@ -206,17 +226,18 @@ def onset_corrections(LM, P, m, bounds, end, onsets):
             onsets[k, 0], onsets[k, 1], onsets[k, 2], onsets[k, 3], onsets[k, 4] = g0x, g0y, g1x, g1y, 1.0
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def force(LM, P, out, loads, onsets, bounds, tau, e_x, e_y, v_x, v_y, sub, stage):
     """``LawModel.force`` at RK4 stage ``stage`` of substep ``sub``: the law, the onset correction, the ramp of
     the end corrections; records the substep's start state (stage 0)."""
     s = tau - LM[0]
+    q = _u(sub)
     fx, fy = law(LM, P, out, loads, s, e_x, e_y, v_x, v_y)
     if stage == 0:
-        bounds[sub, 0], bounds[sub, 1], bounds[sub, 2], bounds[sub, 3] = e_x, e_y, v_x, v_y
-    if onsets[sub, 4] != 0.0:
+        bounds[q, 0], bounds[q, 1], bounds[q, 2], bounds[q, 3] = e_x, e_y, v_x, v_y
+    if onsets[q, 4] != 0.0:
         sigma = 0.0 if stage == 0 else (1.0 if stage == 3 else 0.5)
-        fx, fy = fx + (onsets[sub, 0] + onsets[sub, 2] * sigma), fy + (onsets[sub, 1] + onsets[sub, 3] * sigma)
+        fx, fy = fx + (onsets[q, 0] + onsets[q, 2] * sigma), fy + (onsets[q, 1] + onsets[q, 3] * sigma)
     r = s / LM[1]
     return fx + LM[6] + r * (LM[8] - LM[6]), fy + LM[7] + r * (LM[9] - LM[7])
 
@@ -225,11 +246,20 @@ def force(LM, P, out, loads, onsets, bounds, tau, e_x, e_y, v_x, v_y, sub, stage
 def advance(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R, L, LR, W, u, acc, p1, stages):
     """``kernels.advance`` (same arithmetic, the energy account's stages and powers) with the law-model's force
     at every stage, the first included (the master's RK4 calls ``force`` four times per substep)."""
+    y = y.copy()
+    drift, finite = _substeps(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R, L, LR, W, u, acc,
+                              stages)
+    return y, drift, finite
+
+
+@njit(**LEAF)
+def _substeps(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R, L, LR, W, u, acc, stages):
+    """``advance``'s substeps on y in place (allocating nothing: no reference counting around its calls); returns
+    the end state's max |Phi| and whether it is finite."""
     N = y.shape[0]
     ork = _layout(I)[9]                  # in W: the four stages' dy/dt, the stage state, the stages' powers
     yt = W[ork + 4 * N:ork + 5 * N]
     opw = ork + 5 * N
-    y = y.copy()
     h2 = 0.5 * hs
     nb = I[0]
     for sub in range(substeps):
@@ -239,31 +269,38 @@ def advance(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R,
             if st == 0:
                 ts = t
                 for i in range(N):
-                    yt[i] = y[i]
+                    yt[_u(i)] = y[_u(i)]
             else:
                 cs = h2 if st < 3 else hs                  # y + h/2 k1, y + h/2 k2, y + h k3
                 ts = t + cs
                 o = ork + (st - 1) * N
                 for i in range(N):
-                    yt[i] = y[i] + cs * W[o + i]
-            stage_inputs(yt, I, R, L, LR, W, u)
+                    yt[_u(i)] = y[_u(i)] + cs * W[_u(o + i)]
+            if st == 0 and sub > 0 and L[0] == 1:
+                _applied(I, R, W)         # the rotations and inputs of y: the last substep's end left them
+            else:
+                stage_inputs(yt, I, R, L, LR, W, u)
             fx, fy = force(LM, P, out, loads, onsets, bounds, ts, u[0], u[1], u[2], u[3], sub, st)
             stage_derivative(ts, yt, fx, fy, I, R, L, LR, W, u, k)
             o = opw + 3 * st
-            W[o], W[o + 1], W[o + 2] = powers(yt, I, R, W)
+            W[_u(o)], W[_u(o + 1)], W[_u(o + 2)] = powers(yt, I, R, W)
             _stage_row(stages, 5 * sub + st, yt, u, nb, L)
         c = hs / 6.0
         for i in range(N):
-            y[i] = y[i] + c * (W[ork + i] + 2.0 * (W[ork + N + i] + W[ork + 2 * N + i]) + W[ork + 3 * N + i])
+            y[_u(i)] = y[_u(i)] + c * (W[_u(ork + i)] + 2.0 * (W[_u(ork + N + i)] + W[_u(ork + 2 * N + i)])
+                                       + W[_u(ork + 3 * N + i)])
         for j in range(3):
-            acc[j] += c * (W[opw + j] + 2.0 * (W[opw + 3 + j] + W[opw + 6 + j]) + W[opw + 9 + j])
+            acc[j] += c * (W[_u(opw + j)] + 2.0 * (W[_u(opw + 3 + j)] + W[_u(opw + 6 + j)]) + W[_u(opw + 9 + j)])
         if L[0] == 1:
             _rotations(y, I, W)
             _link_inputs(y, I, L, LR, W, u)
         _stage_row(stages, 5 * sub + 4, y, u, nb, L)
     for i in range(N):
         if not math.isfinite(y[i]):
-            return y, math.nan, False
-    prepare(y, t_end, I, R, L, LR, W, u)
-    return y, max_violation(I, W), True
+            return math.nan, False
+    if L[0] == 1 and substeps > 0:     # ``prepare`` but the rotations and inputs of y, there since the last substep
+        _kinematics(y, t_end, I, R, W)
+    else:
+        prepare(y, t_end, I, R, L, LR, W, u)
+    return max_violation(I, W), True
 

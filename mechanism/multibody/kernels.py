@@ -29,7 +29,10 @@ radius, journal radius]``); its force over a communication step is a coupling sc
 The equations and their numbers are those of ``solver.py`` (Xu et al. 2012 eq. 3-9, Baumgarte
 stabilisation) and ``mechanism.cosim.joint`` (eq. 10-12, 13-15, 20-23); see those modules for
 the derivations. Every kernel is ``@njit(cache=True)``: compiled once per machine and kept on
-disk next to this file (``__pycache__``).
+disk next to this file (``__pycache__``). The kernels that allocate nothing (``LEAF``) are compiled without
+numba's reference counting, and the hot ones index with unsigned indices (``_u``): both only remove work around
+the arithmetic (atomic increments around each call, the wraparound of a negative index on each access), the
+numbers are the same bit for bit (the headline's outputs compare equal with ``cmp``).
 
 Work arrays are preallocated by the caller (``Workspace``: ``np.zeros(workspace_size(I))``) so that a
 step allocates nothing but its result. The kernels address it by offsets (``_layout``), not views: Phi_q
@@ -49,6 +52,11 @@ import math
 
 import numpy as np
 from numba import njit
+
+#: the options of the kernels that allocate nothing: compiled without numba's reference counting (``_nrt``), so
+#: that a call passes its arrays without the atomic increments and decrements around it (a tenth of the law-model
+#: step's time when they were counted; the arithmetic is the same)
+LEAF = {"cache": True, "_nrt": False}
 
 H_I = 8   # header length of I
 H_D = 16  # length of the directory of the sparsity lists in I
@@ -131,7 +139,14 @@ def workspace_size(ints: np.ndarray) -> int:
     return m * n + 5 * m + m * m + 2 * n + 2 * (nb + 1) + 10 * n + 12
 
 
-@njit(cache=True)
+#: an index (never negative here) as unsigned, ``_u(i)``: numba then indexes an array without the wraparound of a
+#: negative index (a shift, a mask and an add on every access; half the time of ``_solve`` where they were counted).
+#: The hot kernels index with it; the values read and written are the same. A cast, not a function: nothing to
+#: inline (an ``inline="always"`` helper at each of its call sites cost seconds of the first run's compile).
+_u = np.uint64
+
+
+@njit(**LEAF)
 def _layout(I):
     """Offsets in W: (phi, gamma, rhs, lambda, Phi_t, S, Q, M^-1 Q, cos/sin, RK4 stages); Phi_q is at 0."""
     nb, n, m = I[0], I[1], I[2]
@@ -143,29 +158,30 @@ def _layout(I):
 
 
 # ---------------------------------------------------------------------------------- kinematics
-@njit(cache=True)
+@njit(**LEAF)
 def _rotations(y, I, W):
     """cos and sin of every body's angle (ground: 1, 0) into W, once per state."""
     nb = I[0]
     o = _layout(I)[8]
     for b in range(nb):
-        th = y[3 * b + 2]
-        W[o + 2 * b] = math.cos(th)
-        W[o + 2 * b + 1] = math.sin(th)
-    W[o + 2 * nb] = 1.0
-    W[o + 2 * nb + 1] = 0.0
+        th = y[_u(3 * b + 2)]
+        W[_u(o + 2 * b)] = math.cos(th)
+        W[_u(o + 2 * b + 1)] = math.sin(th)
+    W[_u(o + 2 * nb)] = 1.0
+    W[_u(o + 2 * nb + 1)] = 0.0
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _body_point(y, n, nb, b, sx, sy, c, s):
     """(omega, u_x, u_y, x, y, xd, yd): u = A s' of a point on body b (eq. 10) and the body's state
     (q = y[:n], qd = y[n:]), given c, s = cos, sin of its angle; ground (b = nb): u = s', the rest 0."""
     if b >= nb:
         return 0.0, sx, sy, 0.0, 0.0, 0.0, 0.0
-    return y[n + 3 * b + 2], c * sx - s * sy, s * sx + c * sy, y[3 * b], y[3 * b + 1], y[n + 3 * b], y[n + 3 * b + 1]
+    o, v = 3 * b, n + 3 * b                              # (int64 + uint64 is a float in numba: _u last)
+    return (y[_u(v + 2)], c * sx - s * sy, s * sx + c * sy, y[_u(o)], y[_u(o + 1)], y[_u(v)], y[_u(v + 1)])
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _kinematics(y, t, I, R, W):
     """Phi (eq. 3), Phi_q, gamma (eq. 5) and Phi_t (eq. 4) of the state y = [q, qd] in internal row order,
     written in W; the rotations (``_rotations``) of y must be in W."""
@@ -173,15 +189,15 @@ def _kinematics(y, t, I, R, W):
     ophi, ogam, _, _, ophit, _, _, _, ocs, _ = _layout(I)
     oR = H_R
     for x in range(m * n):
-        W[x] = 0.0
+        W[_u(x)] = 0.0
     for k in range(K):
-        j, i, r = I[H_I + k], I[H_I + K + k], I[H_I + 2 * K + k]
-        refI = R[oR + 6 * K + k]
+        j, i, r = I[_u(H_I + k)], I[_u(H_I + K + k)], I[_u(H_I + 2 * K + k)]
+        refI = R[_u(oR + 6 * K + k)]
         # u = A s' (eq. 10) of each point, its body's position, velocity and angular velocity
-        wj, ujx, ujy, zjx, zjy, zdjx, zdjy = _body_point(y, n, nb, j, R[oR + k], R[oR + K + k],
-                                                         W[ocs + 2 * j], W[ocs + 2 * j + 1])
-        wi, uix, uiy, zix, ziy, zdix, zdiy = _body_point(y, n, nb, i, R[oR + 2 * K + k], R[oR + 3 * K + k],
-                                                         W[ocs + 2 * i], W[ocs + 2 * i + 1])
+        wj, ujx, ujy, zjx, zjy, zdjx, zdjy = _body_point(y, n, nb, j, R[_u(oR + k)], R[_u(oR + K + k)],
+                                                         W[_u(ocs + 2 * j)], W[_u(ocs + 2 * j + 1)])
+        wi, uix, uiy, zix, ziy, zdix, zdiy = _body_point(y, n, nb, i, R[_u(oR + 2 * K + k)], R[_u(oR + 3 * K + k)],
+                                                         W[_u(ocs + 2 * i)], W[_u(ocs + 2 * i + 1)])
         dx = (zjx - zix) + (ujx - uix)                     # d = r_J^P - r_I^P
         dy = (zjy - ziy) + (ujy - uiy)
         wujx, wujy = wj * ujx, wj * ujy
@@ -189,56 +205,56 @@ def _kinematics(y, t, I, R, W):
         dcx = wj * wujx - wi * wuix                        # -(relative centripetal acceleration)
         dcy = wj * wujy - wi * wuiy
         # n = A_ref n'; cn = conj(n)
-        npx, npy = R[oR + 4 * K + k], R[oR + 5 * K + k]
+        npx, npy = R[_u(oR + 4 * K + k)], R[_u(oR + 5 * K + k)]
         if r < nb and refI != 0.0:
-            cr, sr = W[ocs + 2 * r], W[ocs + 2 * r + 1]
+            cr, sr = W[_u(ocs + 2 * r)], W[_u(ocs + 2 * r + 1)]
             nx, ny = cr * npx - sr * npy, sr * npx + cr * npy
-            wr = y[n + 3 * r + 2]
+            wr = y[_u(n + 3 * r + 2)]
         else:
             nx, ny = npx, npy
             wr = 0.0
         cnx, cny = nx, -ny
         p = cnx * dx - cny * dy                            # Re(conj(n) d), eq. (3)
-        W[ophi + k] = p
+        W[_u(ophi + k)] = p
         if wr != 0.0 or refI != 0.0:
             ddx = (zdjx - zdix) - (wujy - wuiy)            # relative point velocity
             ddy = (zdjy - zdiy) + (wujx - wuix)
             ax = dcx - 2.0 * wr * ddy                      # dcen + 2 i wr dd
             ay = dcy + 2.0 * wr * ddx
-            W[ogam + k] = wr * wr * p + (cnx * ax - cny * ay)   # eq. (5), n turning with body I
+            W[_u(ogam + k)] = wr * wr * p + (cnx * ax - cny * ay)   # eq. (5), n turning with body I
         else:
-            W[ogam + k] = cnx * dcx - cny * dcy            # eq. (5), fixed n
-        W[ophit + k] = 0.0
+            W[_u(ogam + k)] = cnx * dcx - cny * dcy            # eq. (5), fixed n
+        W[_u(ophit + k)] = 0.0
         # Phi_q = Re(conj(n) G): x -> 1, y -> i, theta -> i u (J), minus for I, plus the turning n
         o = k * n
         if j < nb:
-            W[o + 3 * j] += cnx
-            W[o + 3 * j + 1] += -cny
-            W[o + 3 * j + 2] += -(cnx * ujy + cny * ujx)   # Re(cn * i uJ)
+            W[_u(o + 3 * j)] += cnx
+            W[_u(o + 3 * j + 1)] += -cny
+            W[_u(o + 3 * j + 2)] += -(cnx * ujy + cny * ujx)   # Re(cn * i uJ)
         if i < nb:
-            W[o + 3 * i] += -cnx
-            W[o + 3 * i + 1] += cny
+            W[_u(o + 3 * i)] += -cnx
+            W[_u(o + 3 * i + 1)] += cny
             gx = uix + refI * dx
             gy = uiy + refI * dy
-            W[o + 3 * i + 2] += cnx * gy + cny * gx        # Re(cn * (-i g))
+            W[_u(o + 3 * i + 2)] += cnx * gy + cny * gx        # Re(cn * (-i g))
     oc0 = oR + 7 * K
     for a in range(A):
         row = K + a
-        j, i = I[H_I + 3 * K + a], I[H_I + 3 * K + A + a]
-        thj = y[3 * j + 2] if j < nb else 0.0
-        thi = y[3 * i + 2] if i < nb else 0.0
-        om = R[oc0 + A + a]
-        W[ophi + row] = thj - thi - (R[oc0 + a] + om * t)
-        W[ogam + row] = 0.0
-        W[ophit + row] = -om
+        j, i = I[_u(H_I + 3 * K + a)], I[_u(H_I + 3 * K + A + a)]
+        thj = y[_u(3 * j + 2)] if j < nb else 0.0
+        thi = y[_u(3 * i + 2)] if i < nb else 0.0
+        om = R[_u(oc0 + A + a)]
+        W[_u(ophi + row)] = thj - thi - (R[_u(oc0 + a)] + om * t)
+        W[_u(ogam + row)] = 0.0
+        W[_u(ophit + row)] = -om
         o = row * n
         if j < nb:
-            W[o + 3 * j + 2] += 1.0
+            W[_u(o + 3 * j + 2)] += 1.0
         if i < nb:
-            W[o + 3 * i + 2] -= 1.0
+            W[_u(o + 3 * i + 2)] -= 1.0
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _cholesky_solve(I, W, oS, ob):
     """Solve S x = b in place in b (S: the lower triangle of W[oS:oS + m m], row-major, symmetric positive
     semidefinite, overwritten by its factor L; b = W[ob:ob + m]), visiting only the entries of L's pattern
@@ -250,96 +266,97 @@ def _cholesky_solve(I, W, oS, ob):
     dropped pivots."""
     m = I[2]
     d = I[5]                                              # the directory (``pack``)
-    lrp, lrc, lcp, lcr, cmp, cmk = I[d + 8], I[d + 9], I[d + 10], I[d + 11], I[d + 12], I[d + 13]
+    lrp, lrc, lcp, lcr = I[_u(d + 8)], I[_u(d + 9)], I[_u(d + 10)], I[_u(d + 11)]
+    cmp, cmk = I[_u(d + 12)], I[_u(d + 13)]
     big = 0.0
     for j in range(m):
-        big = max(big, abs(W[oS + j * m + j]))
+        big = max(big, abs(W[_u(oS + j * m + j)]))
     tol = 1e-12 * big
     dropped = 0
     q = cmp                                               # the common entries' pointers, column by column
     for j in range(m):
         rj = oS + j * m
-        d = W[rj + j]
-        for p in range(I[lrp + j], I[lrp + j + 1]):
-            k = I[lrc + p]
-            d -= W[rj + k] * W[rj + k]
+        d = W[_u(rj + j)]
+        for p in range(I[_u(lrp + j)], I[_u(lrp + j + 1)]):
+            k = I[_u(lrc + p)]
+            d -= W[_u(rj + k)] * W[_u(rj + k)]
         if not d > tol:
             dropped += 1
-            W[rj + j] = 0.0
-            for p in range(I[lcp + j], I[lcp + j + 1]):
-                W[oS + I[lcr + p] * m + j] = 0.0
-            q += I[lcp + j + 1] - I[lcp + j]
+            W[_u(rj + j)] = 0.0
+            for p in range(I[_u(lcp + j)], I[_u(lcp + j + 1)]):
+                W[_u(oS + I[_u(lcr + p)] * m + j)] = 0.0
+            q += I[_u(lcp + j + 1)] - I[_u(lcp + j)]
             continue
         d = math.sqrt(d)
-        W[rj + j] = d
-        for p in range(I[lcp + j], I[lcp + j + 1]):
-            ri = oS + I[lcr + p] * m
-            s = W[ri + j]
-            for c in range(I[q], I[q + 1]):
-                k = I[cmk + c]
-                s -= W[ri + k] * W[rj + k]
+        W[_u(rj + j)] = d
+        for p in range(I[_u(lcp + j)], I[_u(lcp + j + 1)]):
+            ri = oS + I[_u(lcr + p)] * m
+            s = W[_u(ri + j)]
+            for c in range(I[_u(q)], I[_u(q + 1)]):
+                k = I[_u(cmk + c)]
+                s -= W[_u(ri + k)] * W[_u(rj + k)]
             q += 1
-            W[ri + j] = s / d
+            W[_u(ri + j)] = s / d
     for i in range(m):
         ri = oS + i * m
-        if W[ri + i] == 0.0:
-            W[ob + i] = 0.0
+        if W[_u(ri + i)] == 0.0:
+            W[_u(ob + i)] = 0.0
             continue
-        s = W[ob + i]
-        for p in range(I[lrp + i], I[lrp + i + 1]):
-            k = I[lrc + p]
-            s -= W[ri + k] * W[ob + k]
-        W[ob + i] = s / W[ri + i]
+        s = W[_u(ob + i)]
+        for p in range(I[_u(lrp + i)], I[_u(lrp + i + 1)]):
+            k = I[_u(lrc + p)]
+            s -= W[_u(ri + k)] * W[_u(ob + k)]
+        W[_u(ob + i)] = s / W[_u(ri + i)]
     for i in range(m - 1, -1, -1):
-        if W[oS + i * m + i] == 0.0:
-            W[ob + i] = 0.0
+        if W[_u(oS + i * m + i)] == 0.0:
+            W[_u(ob + i)] = 0.0
             continue
-        s = W[ob + i]
-        for p in range(I[lcp + i], I[lcp + i + 1]):
-            k = I[lcr + p]
-            s -= W[oS + k * m + i] * W[ob + k]
-        W[ob + i] = s / W[oS + i * m + i]
+        s = W[_u(ob + i)]
+        for p in range(I[_u(lcp + i)], I[_u(lcp + i + 1)]):
+            k = I[_u(lcr + p)]
+            s -= W[_u(oS + k * m + i)] * W[_u(ob + k)]
+        W[_u(ob + i)] = s / W[_u(oS + i * m + i)]
     return dropped
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _solve(y, I, R, W, dy):
     """Eq. (9) with Baumgarte's gamma* for the kinematics and Q in W: qdd into dy[n:] and lambda (internal
     order) in W. (Phi_q M^-1 Phi_q^T) lam = Phi_q M^-1 Q - gamma*, qdd = M^-1 (Q - Phi_q^T lam)."""
     n, m, K, A = I[1], I[2], I[3], I[4]
     ophi, ogam, orhs, olam, ophit, oS, oQ, otmp, _, _ = _layout(I)
     d = I[5]                                               # the directory (``pack``)
-    orp, orc, ocp, ocr = I[d], I[d + 1], I[d + 2], I[d + 3]
-    osr, osc, osp, ost = I[d + 4], I[d + 5], I[d + 6], I[d + 7]
+    orp, orc, ocp, ocr = I[_u(d)], I[_u(d + 1)], I[_u(d + 2)], I[_u(d + 3)]
+    osr, osc, osp, ost = I[_u(d + 4)], I[_u(d + 5)], I[_u(d + 6)], I[_u(d + 7)]
     om = H_R + 7 * K + 2 * A                               # 1/M in R
     a2, b2 = R[0], R[1]
     for i in range(n):
-        W[otmp + i] = R[om + i] * W[oQ + i]
+        W[_u(otmp + i)] = R[_u(om + i)] * W[_u(oQ + i)]
     for r in range(m):                                     # Phi_q M^-1 Q - gamma*
         s = 0.0
         pd = 0.0
         o = r * n
-        for p in range(I[orp + r], I[orp + r + 1]):
-            c = I[orc + p]
-            s += W[o + c] * W[otmp + c]
-            pd += W[o + c] * y[n + c]
-        W[orhs + r] = s - W[ogam + r] + a2 * (pd + W[ophit + r]) + b2 * W[ophi + r]
-        W[olam + r] = W[orhs + r]
-    for e in range(I[d + 14]):                                 # S = Phi_q M^-1 Phi_q^T, its pattern's lower triangle
-        o, oc = I[osr + e] * n, I[osc + e] * n
+        for p in range(I[_u(orp + r)], I[_u(orp + r + 1)]):
+            c = I[_u(orc + p)]
+            s += W[_u(o + c)] * W[_u(otmp + c)]
+            pd += W[_u(o + c)] * y[_u(n + c)]
+        W[_u(orhs + r)] = s - W[_u(ogam + r)] + a2 * (pd + W[_u(ophit + r)]) + b2 * W[_u(ophi + r)]
+        W[_u(olam + r)] = W[_u(orhs + r)]
+    for e in range(I[_u(d + 14)]):                                 # S = Phi_q M^-1 Phi_q^T, its pattern's lower triangle
+        o, oc = I[_u(osr + e)] * n, I[_u(osc + e)] * n
         v = 0.0
-        for p in range(I[osp + e], I[osp + e + 1]):
-            i = I[ost + p]
-            v += W[o + i] * R[om + i] * W[oc + i]
-        W[oS + I[osr + e] * m + I[osc + e]] = v
+        for p in range(I[_u(osp + e)], I[_u(osp + e + 1)]):
+            i = I[_u(ost + p)]
+            v += W[_u(o + i)] * R[_u(om + i)] * W[_u(oc + i)]
+        W[_u(oS + I[_u(osr + e)] * m + I[_u(osc + e)])] = v
     if m > 0:
         _cholesky_solve(I, W, oS, olam)                    # redundant rows dropped (see there)
     for i in range(n):                                     # M^-1 (Q - Phi_q^T lam)
-        v = W[otmp + i]
-        for p in range(I[ocp + i], I[ocp + i + 1]):
-            r = I[ocr + p]
-            v -= R[om + i] * W[r * n + i] * W[olam + r]
-        dy[n + i] = v
+        v = W[_u(otmp + i)]
+        for p in range(I[_u(ocp + i)], I[_u(ocp + i + 1)]):
+            r = I[_u(ocr + p)]
+            v -= R[_u(om + i)] * W[_u(r * n + i)] * W[_u(olam + r)]
+        dy[_u(n + i)] = v
 
 
 @njit(cache=True)
@@ -358,7 +375,7 @@ def accelerations(q, qd, t, Q, I, R, W, qdd):
         qdd[i] = dy[n + i]
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _in_model_order(I, W, offset, out):
     """The constraint rows of W from ``offset`` (kernel row order) into ``out`` in model order."""
     otm = H_I + 3 * I[3] + 2 * I[4]
@@ -372,33 +389,33 @@ def multipliers(I, W, lam_model):
     _in_model_order(I, W, _layout(I)[3], lam_model)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def constraints(I, W, phi_model):
     """Phi of the last kinematics evaluation, in model order."""
     _in_model_order(I, W, _layout(I)[0], phi_model)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def max_violation(I, W):
     """max |Phi| of the last kinematics evaluation [m or rad]."""
     ophi = _layout(I)[0]
     v = 0.0
     for k in range(I[2]):
-        a = abs(W[ophi + k])
+        a = abs(W[_u(ophi + k)])
         if a > v:                                          # noqa: PLR1730 (a NaN is skipped, as before)
             v = a
     return v
 
 
 # ---------------------------------------------------------------------------------- force joint
-@njit(cache=True)
+@njit(**LEAF)
 def _point(y, n, nb, b, sx, sy, W, ocs):
     """(x, y, xd, yd) of a point s' on body b (eq. 10-12) with the body's cos, sin in W; ground: (s', 0)."""
-    w, ux, uy, x, yy, xd, yd = _body_point(y, n, nb, b, sx, sy, W[ocs + 2 * b], W[ocs + 2 * b + 1])
+    w, ux, uy, x, yy, xd, yd = _body_point(y, n, nb, b, sx, sy, W[_u(ocs + 2 * b)], W[_u(ocs + 2 * b + 1)])
     return x + ux, yy + uy, xd - w * uy, yd + w * ux
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _link_inputs(y, I, L, LR, W, u):
     """The bearing's inputs (e_x, e_y, v_x, v_y, omega_inner, omega_outer) of y, eq. (10)-(12), into u;
     the rotations of y (``_rotations``) must be in W."""
@@ -411,22 +428,22 @@ def _link_inputs(y, I, L, LR, W, u):
     u[1] = yj - yi
     u[2] = vxj - vxi
     u[3] = vyj - vyi
-    u[4] = y[n + 3 * jb + 2] if jb < nb else 0.0
-    u[5] = y[n + 3 * hb + 2] if hb < nb else 0.0
+    u[4] = y[_u(n + 3 * jb + 2)] if jb < nb else 0.0
+    u[5] = y[_u(n + 3 * hb + 2)] if hb < nb else 0.0
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _add_point_force(W, oQ, y, nb, b, fx, fy, ax, ay):
     """Generalized force of F = (fx, fy) applied at (ax, ay) on body b into Q = W[oQ:] (eq. 20-23)."""
     if b >= nb:
         return
     i = 3 * b
-    W[oQ + i] += fx
-    W[oQ + i + 1] += fy
-    W[oQ + i + 2] += (ax - y[i]) * fy - (ay - y[i + 1]) * fx
+    W[_u(oQ + i)] += fx
+    W[_u(oQ + i + 1)] += fy
+    W[_u(oQ + i + 2)] += (ax - y[_u(i)]) * fy - (ay - y[_u(i + 1)]) * fx
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def _add_link_force(y, I, L, LR, W, ex, ey, fx, fy):
     """Generalized forces of F on the housing body and -F on the journal body into Q in W, eq. (20)-(23);
     the rotations of y (``_rotations``) must be in W."""
@@ -463,7 +480,7 @@ def _applied(I, R, W):
     o = H_R + 7 * K + 2 * A + n
     oQ = _layout(I)[6]
     for i in range(n):
-        W[oQ + i] = R[o + i]
+        W[_u(oQ + i)] = R[_u(o + i)]
 
 
 @njit(cache=True, inline="always")
@@ -495,7 +512,7 @@ def stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy):
     if L[0] == 1:
         _add_link_force(y, I, L, LR, W, u[0], u[1], fx, fy)
     for i in range(n):
-        dy[i] = y[n + i]
+        dy[_u(i)] = y[_u(n + i)]
     _kinematics(y, tau, I, R, W)
     _solve(y, I, R, W, dy)
 
@@ -511,23 +528,24 @@ def powers(y, I, R, W):
     _, _, _, olam, ophit, _, oQ, _, _, _ = _layout(I)
     drive = 0.0
     for r in range(m):
-        drive += W[olam + r] * W[ophit + r]
+        drive += W[_u(olam + r)] * W[_u(ophit + r)]
     o = H_R + 7 * K + 2 * A + n
     app = 0.0
     total = 0.0
     for i in range(n):
-        app += R[o + i] * y[n + i]
-        total += W[oQ + i] * y[n + i]
+        app += R[_u(o + i)] * y[_u(n + i)]
+        total += W[_u(oQ + i)] * y[_u(n + i)]
     return drive, app, total - app
 
 
 @njit(cache=True, inline="always")
 def _stage_row(stages, row, y, u, nb, L):
     """The energy account's record of a stage state: its bearing inputs u and the ring angles (journal, housing)."""
+    q = _u(row)
     for i in range(6):
-        stages[row, i] = u[i]
-    stages[row, 6] = y[3 * L[2] + 2] if L[2] < nb else 0.0
-    stages[row, 7] = y[3 * L[1] + 2] if L[1] < nb else 0.0
+        stages[q, i] = u[i]
+    stages[q, 6] = y[3 * L[2] + 2] if L[2] < nb else 0.0
+    stages[q, 7] = y[3 * L[1] + 2] if L[1] < nb else 0.0
 
 
 @njit(cache=True)
@@ -546,11 +564,19 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc
     ``stages`` (5 substeps x 8): per substep, rows of its four stage states and its end state (``_stage_row``),
     for the bearing side of the account (``mechanism.cosim.energy``).
     """
+    y = y.copy()
+    drift, finite = _substeps(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc, p1, stages)
+    return y, drift, finite
+
+
+@njit(**LEAF)
+def _substeps(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc, p1, stages):
+    """``advance``'s substeps on y in place (allocating nothing: no reference counting around its calls); returns
+    the end state's max |Phi| and whether it is finite."""
     N = y.shape[0]
     ork = _layout(I)[9]                  # in W: the four stages' dy/dt, the stage state, the stages' powers
     yt = W[ork + 4 * N:ork + 5 * N]
     opw = ork + 5 * N
-    y = y.copy()
     h2 = 0.5 * hs
     account = acc is not None and p1 is not None and stages is not None
     nb = I[0]
@@ -561,34 +587,42 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc
             if st == 0:
                 ts = t
                 for i in range(N):
-                    yt[i] = y[i]
+                    yt[_u(i)] = y[_u(i)]
             else:
                 cs = h2 if st < 3 else hs                  # y + h/2 k1, y + h/2 k2, y + h k3
                 ts = t + cs
                 o = ork + (st - 1) * N
                 for i in range(N):
-                    yt[i] = y[i] + cs * W[o + i]
+                    yt[_u(i)] = y[_u(i)] + cs * W[_u(o + i)]
             if st == 0 and sub == 0 and k1_valid:
                 for i in range(N):
-                    k[i] = k1[i]
+                    k[_u(i)] = k1[_u(i)]
                 if account:
-                    W[opw], W[opw + 1], W[opw + 2] = p1[0], p1[1], p1[2]
+                    W[_u(opw)], W[_u(opw + 1)], W[_u(opw + 2)] = p1[0], p1[1], p1[2]
                     if L[0] == 1:
                         _rotations(y, I, W)
                         _link_inputs(y, I, L, LR, W, u)
-            else:
-                rhs(ts, yt, fm, I, R, L, LR, W, u, k)
+            else:                                          # ``rhs``, one call site of its parts: inlined once
+                if st == 0 and sub > 0 and account and L[0] == 1:
+                    _applied(I, R, W)                      # the rotations and inputs of y: the last substep's end
+                else:
+                    stage_inputs(yt, I, R, L, LR, W, u)
+                fx = fy = 0.0
+                if L[0] == 1:
+                    fx, fy = force_of_model(fm, ts, u[0], u[1], u[2], u[3])
+                stage_derivative(ts, yt, fx, fy, I, R, L, LR, W, u, k)
                 if account:
                     o = opw + 3 * st
-                    W[o], W[o + 1], W[o + 2] = powers(yt, I, R, W)
+                    W[_u(o)], W[_u(o + 1)], W[_u(o + 2)] = powers(yt, I, R, W)
             if account:
                 _stage_row(stages, 5 * sub + st, yt, u, nb, L)
         c = hs / 6.0
         for i in range(N):
-            y[i] = y[i] + c * (W[ork + i] + 2.0 * (W[ork + N + i] + W[ork + 2 * N + i]) + W[ork + 3 * N + i])
+            y[_u(i)] = y[_u(i)] + c * (W[_u(ork + i)] + 2.0 * (W[_u(ork + N + i)] + W[_u(ork + 2 * N + i)])
+                                       + W[_u(ork + 3 * N + i)])
         if account:
             for j in range(3):
-                acc[j] += c * (W[opw + j] + 2.0 * (W[opw + 3 + j] + W[opw + 6 + j]) + W[opw + 9 + j])
+                acc[j] += c * (W[_u(opw + j)] + 2.0 * (W[_u(opw + 3 + j)] + W[_u(opw + 6 + j)]) + W[_u(opw + 9 + j)])
             if L[0] == 1:
                 _rotations(y, I, W)
                 _link_inputs(y, I, L, LR, W, u)
@@ -599,12 +633,15 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc
             finite = False
             break
     if finite:
-        prepare(y, t_end, I, R, L, LR, W, u)
-        return y, max_violation(I, W), True
-    return y, math.nan, False
+        if account and L[0] == 1 and substeps > 0:         # ``prepare`` but the rotations and inputs of y, there
+            _kinematics(y, t_end, I, R, W)                  # since the last substep's end
+        else:
+            prepare(y, t_end, I, R, L, LR, W, u)
+        return max_violation(I, W), True
+    return math.nan, False
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def prepare(y, t, I, R, L, LR, W, u):
     """Kinematics of the state y at t into W and its bearing inputs into u (the tail of ``advance``)."""
     _rotations(y, I, W)
@@ -613,7 +650,7 @@ def prepare(y, t, I, R, L, LR, W, u):
         _link_inputs(y, I, L, LR, W, u)
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t, cv, react, p1=None):
     """dy/dt = [qd, qdd] and lambda (model order) at the end state y whose kinematics ``advance``
     (or ``prepare``) left in W (and its bearing inputs in u), with the exchanged force (fx, fy) at
@@ -680,5 +717,5 @@ def kinetic_energy(y, I, R):
     o = H_R + 7 * K + 2 * A + 2 * n
     T = 0.0
     for i in range(n):
-        T += R[o + i] * (y[n + i] * y[n + i])
+        T += R[_u(o + i)] * (y[_u(n + i)] * y[_u(n + i)])
     return 0.5 * T
