@@ -139,10 +139,29 @@ def test_the_warmup_compiles_only_the_stages_of_the_runs_step(variant, monkeypat
     compiled_driver.start_warmup(variant)
     assert len(started) == 1
     asked = started[0][started[0].index("mechanism.cosim.warmup") + 1:]
-    assert asked == (warmup.needed(*variant) if variant is not None else [])
+    wanted = warmup.needed(*variant) if variant is not None else []
+    assert asked == [name for name in wanted if name not in warmup.RUN_SHARE]     # the rest: the run's own share
     assert compiled_driver._variant == variant
     if variant == (True, True):
-        assert "in-process" not in asked and "law-model" in asked
+        assert "in-process" not in asked and "law-model" in asked and "advance" not in asked
+
+
+def test_the_run_compiles_its_share_then_waits_for_the_rest(monkeypatch):
+    """``finish_warmup`` first compiles the stages left to the run's process (``warmup.RUN_SHARE``, recorded as
+    done), then waits for the worker's; ``advance`` (the run's share) compiled here in a fresh process loads
+    from the cache a second time (the signatures are run_steps' own: tests above)."""
+    from mechanism.cosim import warmup
+    compiled = []
+    monkeypatch.setattr(warmup, "compile_stages", lambda names, done: [compiled.append(n) or done(n) for n in names])
+    monkeypatch.setattr(compiled_driver, "_variant", (True, True))
+    worker = "import time\nfor s in ('loop', 'fmu', 'law-model'):\n    print(s, flush=True)\ntime.sleep(60)"
+    process = compiled_driver.collect_stages(subprocess.Popen([sys.executable, "-c", worker],
+                                                              stdout=subprocess.PIPE, text=True))
+    process.share = ["advance"]
+    start = time.monotonic()
+    compiled_driver.finish_warmup(process, timeout=50.0)
+    assert time.monotonic() - start < 30.0 and compiled == ["advance"]
+    assert process.poll() is not None and process.done == {"loop", "advance", "fmu", "law-model"}
 
 
 def test_a_first_fmu_run_starts_the_warmup_for_its_own_step(monkeypatch):

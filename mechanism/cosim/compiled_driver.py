@@ -98,7 +98,8 @@ def start_warmup(variant: tuple[bool, bool] | None = None) -> subprocess.Popen |
     ``variant``: the step the run will compile, (through an FMU, law-model's), as ``CompiledLoop`` will find it
     (``run_master`` knows it from the endpoint and the scheme before the loop starts): ``cached`` looks for that
     ``run_steps``, and the process compiles only the stages that step needs (``warmup.needed``), not the other
-    component's exchange nor law-model's for another scheme (about 1.5 s of a first run's critical path).
+    component's exchange nor law-model's for another scheme (about 1.5 s of a first run's critical path), and
+    not those the run's process compiles itself (``warmup.RUN_SHARE``, in ``finish_warmup``: ``process.share``).
     None: every stage, for whichever step comes."""
     wanted = os.environ.get("MECHANISM_COMPILE_WORKER", "1").strip()
     if wanted not in ("0", "1"):
@@ -112,7 +113,8 @@ def start_warmup(variant: tuple[bool, bool] | None = None) -> subprocess.Popen |
     if python is None:
         return None
     from mechanism.cosim import warmup
-    stages = warmup.needed(*variant) if variant is not None else []
+    wanted = warmup.needed(*variant) if variant is not None else []
+    stages = [name for name in wanted if name not in warmup.RUN_SHARE]
     root = str(Path(__file__).resolve().parents[2])     # the folder holding the mechanism package imported here
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
     try:    # its own session: a Ctrl-C at the terminal reaches the run, which ends the process itself
@@ -121,7 +123,10 @@ def start_warmup(variant: tuple[bool, bool] | None = None) -> subprocess.Popen |
                                    text=True, start_new_session=True)
     except (OSError, TypeError, ValueError):
         return None
-    return collect_stages(process)
+    process = collect_stages(process)
+    if process is not None:
+        process.share = [name for name in wanted if name in warmup.RUN_SHARE]
+    return process
 
 
 def python_executable() -> str | None:
@@ -158,13 +163,21 @@ def finish_warmup(process: subprocess.Popen | None, timeout: float = 300.0,
     """Wait for ``start_warmup``'s process (at most ``timeout`` s; 0: not at all) until it has compiled the stages
     the step of the last ``CompiledLoop`` needs (``warmup.needed``; all of them before one is made), calling
     ``poll`` (e.g. the run's signal check, which may raise) every 0.1 s; end the process if it still runs then
-    (the stages it was still compiling are needed by other components or schemes only)."""
+    (the stages it was still compiling are needed by other components or schemes only).
+
+    Before waiting, this process compiles the stages left to it (``process.share``, ``warmup.RUN_SHARE``): the
+    two processes then end their parts at about the same time."""
     if process is None:
         return
     from mechanism.cosim import warmup
     names = warmup.needed(*_variant) if _variant is not None else [name for name, _ in warmup.STAGES]
     deadline = time.monotonic() + timeout
     try:
+        share = [name for name in getattr(process, "share", ()) if name in names]
+        if timeout > 0 and share:
+            warmup.compile_stages(share, getattr(process, "done", set()).add)
+            if poll is not None:
+                poll()
         while not set(names) <= getattr(process, "done", set()):
             try:
                 process.wait(min(0.1, max(0.0, deadline - time.monotonic())))

@@ -93,14 +93,27 @@ def needed(fmu: bool, law_model: bool) -> list[str]:
     return ["loop", "advance", "fmu" if fmu else "in-process"] + (["law-model"] if law_model else [])
 
 
+#: the stages the run's process compiles itself, after its own kernels and before it waits for this process (the
+#: two cores of a first run balanced: the run's process would otherwise wait idle for law-model's stage here, then
+#: compile run_steps; ``kernels.advance``'s callees are in its cache already from ``finish``, and its ideal
+#: counterpart calls ``advance`` anyway). docs/kernels.md, "The first run's compile"
+RUN_SHARE = ("advance",)
+
+
+def compile_stages(names, done=None) -> None:
+    """Compile (or load from the cache) the stages ``names`` in ``STAGES``' order; ``done(name)`` after each."""
+    for name, stage in STAGES:
+        if name in names:
+            for function, args in stage:
+                function.compile(args)
+            if done is not None:
+                done(name)
+
+
 def main(names: list[str] | None = None) -> None:
     """Compile (or load from the cache) the stages ``names`` (default: all) in ``STAGES``' order, printing each
     stage's name when it is in the cache."""
-    for name, stage in STAGES:
-        if names is None or name in names:
-            for function, args in stage:
-                function.compile(args)
-            print(name, flush=True)
+    compile_stages([name for name, _ in STAGES] if names is None else names, lambda name: print(name, flush=True))
 
 
 if __name__ == "__main__":
