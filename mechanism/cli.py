@@ -321,9 +321,15 @@ def exit_now(code: int) -> None:
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
         try:
-            stream.flush()
+            if stream is not None:          # (None: started with that descriptor closed)
+                stream.flush()
         except (OSError, ValueError):   # a closed pipe: nothing more to write there
             pass
+    try:   # C's stdio buffers too (an FMU's or a library's printf): os._exit does not flush them
+        import ctypes
+        ctypes.CDLL(None).fflush(None)
+    except Exception:  # noqa: BLE001  (no C library by that name: nothing to flush)
+        pass
     os._exit(0 if code is None else code if isinstance(code, int) else 1)    # sys.exit's meaning of None
 
 

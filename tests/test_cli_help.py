@@ -28,3 +28,18 @@ def test_every_option_has_help_and_no_raw_markup(name):
     missing = [a.option_strings for a in sub._actions if a.option_strings and not a.help]
     assert not missing, f"{name}: options without help text {missing}"
     assert "``" not in sub.format_help(), name
+
+
+@pytest.mark.parametrize("code, expected", [("0", 0), ("None", 0), ("3", 3)])
+def test_exit_now_exits_as_sys_exit_even_with_stdout_closed(code, expected):
+    """``cli.exit_now`` (no module tear-down) exits with sys.exit's status, also when the process started with its
+    standard output closed (``sys.stdout`` None: a reviewer's finding, it raised and exited 1)."""
+    import shlex
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    script = f"from mechanism.cli import exit_now; exit_now({code})"
+    done = subprocess.run(["sh", "-c", f"{shlex.quote(sys.executable)} -c {shlex.quote(script)} >&-"], cwd=root,
+                          capture_output=True, text=True)
+    assert done.returncode == expected, done.stderr

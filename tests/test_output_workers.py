@@ -185,3 +185,24 @@ def test_a_worker_that_does_not_answer_is_given_up_and_its_job_runs_in_process(t
                 os.kill(pid, signal.SIGCONT)
         assert w._conns[0] is None and not proc.is_alive()
     assert np.array_equal(got.data, resample(coarse, r["time"]).data)
+
+
+def _slow_write(path: str) -> str:
+    """A job that takes a while and writes its file atomically (as a figure is)."""
+    import time
+    from pathlib import Path
+    time.sleep(1.0)
+    Path(path + ".tmp").write_text("done")
+    os.replace(path + ".tmp", path)
+    return path
+
+
+def test_close_waits_for_the_second_workers_job_in_flight(tmp_path, monkeypatch):
+    """``close`` answers every job in flight before it ends any worker: the first worker's end ends the second
+    (its child), which must not be drawing then (a reviewer's finding: its files were lost, its temporary left)."""
+    monkeypatch.setitem(workers.JOBS, "slow_write", _slow_write)
+    target = tmp_path / "done.txt"
+    with workers.OutputWorkers(2) as w:
+        assert w.submit(1, "slow_write", str(target))
+    assert target.read_text() == "done"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["done.txt"]

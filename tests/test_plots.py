@@ -150,3 +150,28 @@ def test_the_png_writer_gives_the_canvas_pixels(tmp_path):
         assert im.mode == "RGBA" and np.array_equal(np.asarray(im), rgba)
         assert np.allclose(im.info["dpi"], plots.DPI, atol=0.01) and im.info["Software"].startswith("Matplotlib")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.png"]
+
+
+def test_an_ideal_run_without_the_column_leaves_the_run_curve_in_its_own_style(tmp_path):
+    """With an ideal counterpart that lacks a plotted column, the run's curve is drawn as the run's (the last
+    curves of the row), not in the ideal's style (a reviewer's finding: the curves were paired from the front)."""
+    from mechanism.cosim.record import RunResult
+    n = 2001
+    t = np.linspace(0.0, 0.1, n)
+    crank = 2 * np.pi * 20 * t
+    cols = ["time", "crank_angle", "slider_a"]
+    r = RunResult(cols, np.column_stack([t, crank, np.sin(crank)]), {"crank_period_s": 0.05})
+    ideal = RunResult(cols[:2], np.column_stack([t, crank]), {})
+    frame = plots.build("slider_acceleration.png", r.meta, True)
+    plots._fill_time(frame, r, ideal, plots.crank_pi(r))
+    (ideal_start, ideal_steady), (run_start, run_steady) = frame.lines[0]
+    assert len(ideal_start.get_xdata()) == len(ideal_steady.get_xdata()) == 0
+    assert len(run_start.get_xdata()) + len(run_steady.get_xdata()) > 0
+
+
+def test_the_png_writer_refuses_what_is_not_8_bit_rgba():
+    from mechanism.output.atomic import png_bytes
+    with pytest.raises(ValueError, match="8-bit RGBA"):
+        png_bytes(np.zeros((2, 2, 4)), 100.0)
+    with pytest.raises(ValueError, match="8-bit RGBA"):
+        png_bytes(np.zeros((2, 2, 3), np.uint8), 100.0)

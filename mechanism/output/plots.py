@@ -243,7 +243,8 @@ def _frame_time_row(axes_row, end: float) -> None:
 def _fill_time_row(axes_row, lines, series: list[tuple[np.ndarray, np.ndarray]]) -> None:
     """``plot_time``'s filling: each curve's points in the start-up and the steady window, the x limits and the
     steady panel's title (the window of the last series), the y limits."""
-    for (start_line, steady_line), (xs, ys) in zip(lines, series):
+    # paired from the end: the run's curve is the last; an ideal run without this column leaves the ideal's empty
+    for (start_line, steady_line), (xs, ys) in zip(list(lines)[::-1], series[::-1]):
         start, steady, _ = windows(xs)
         _set_line(start_line, xs[start], ys[start])
         _set_line(steady_line, xs[steady], ys[steady])

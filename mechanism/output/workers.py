@@ -8,7 +8,7 @@ alone while the command writes the run's table and runs the ideal counterpart, a
 writes the ideal's table (``results.start_run_plots``, ``finish_outputs``; ``write_outputs``: two workers draw a
 share each, ``SHARES``). A worker receives only the columns the figures read, as raw bytes (``ColumnsOf``: the
 command makes no pickled copy of its tables, issue 11). The files are the same bytes as drawn in-process (the
-same functions, ``plots.plot_run`` and ``record.resample``, run in another process) and are written atomically as before (``atomic.save_figure``).
+same functions, ``plots.plot_run`` and ``record.resample``, run in another process) and are written atomically as before (``atomic.save_canvas``).
 
 The first worker imports matplotlib and then forks the second (a "zygote": matplotlib imported once, ~0.7 s of
 CPU less beside the run); each then builds the frames of the figures it will draw (``plots.prepare``: figure,
@@ -228,6 +228,11 @@ def _forked(conns: list, ours: list, modules, plan=None, names: tuple = ()) -> N
         if pid == 0:   # the second worker: its own pipe only, ended by SIGTERM (the first's), no clean-up of the first's
             try:
                 signal.signal(signal.SIGTERM, signal.SIG_DFL)
+                with contextlib.suppress(Exception):   # Linux: ended with the first even if that one is killed
+                    import ctypes
+                    ctypes.CDLL(None).prctl(1, signal.SIGTERM)    # PR_SET_PDEATHSIG
+                if os.getppid() == 1:                  # the first ended before that: no orphan
+                    os._exit(0)
                 with contextlib.suppress(OSError):
                     os.nice(SECOND_NICE)
                 children.clear()
@@ -465,15 +470,15 @@ class OutputWorkers:
         """End every worker: one that answered its jobs is idle (or still importing) and writes nothing; one with a
         job in flight is waited for (its files are written whole). The first is terminated if it has not ended at
         once (it ends the second)."""
-        for k, conn in enumerate(self._conns):
-            if conn is None:
-                continue
-            if self._busy[k]:
+        for k, conn in enumerate(self._conns):    # every job in flight answered first: the first worker's end
+            if conn is not None and self._busy[k]:  # ends the second, which must not be drawing then
                 with contextlib.suppress(EOFError, OSError, TimeoutError):
                     self._answer(k)
                 self._busy[k] = False
-            with contextlib.suppress(OSError, ValueError):
-                conn.send(None)
+        for conn in self._conns:
+            if conn is not None:
+                with contextlib.suppress(OSError, ValueError):
+                    conn.send(None)
         for k, (proc, conn) in enumerate(zip(self._procs, self._conns)):
             if proc is not None:
                 proc.join(timeout=0.2)   # an idle first worker ends at once (after the second); one importing is ended
