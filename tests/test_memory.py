@@ -12,6 +12,7 @@ import warnings
 
 import numpy as np
 import pytest
+from output_worker_helpers import kill_worker
 from scipy.interpolate import CubicSpline
 
 from fmu_bearing.life import LifeAccumulator, LoadRatings, output_values
@@ -22,28 +23,6 @@ from mechanism.output.life import life_from_samples
 from mechanism.output.results import _figures, _peak_of_columns
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
-
-
-def kill_worker(w, k: int) -> None:
-    """SIGKILL output worker ``k`` of ``w`` and wait until it is gone (the second is the first's child: its process
-    is gone when it is a zombie or reaped)."""
-    import os
-    import signal
-    import time
-    pid = w.pid(k)
-    os.kill(pid, signal.SIGKILL)
-    if k == 0:
-        w._procs[0].join(5)
-        return
-    deadline = time.monotonic() + 5
-    while time.monotonic() < deadline:
-        try:
-            with open(f"/proc/{pid}/stat") as f:
-                if f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X"):
-                    return
-        except OSError:
-            return
-        time.sleep(0.01)
 
 
 def same_bits(a: np.ndarray, b: np.ndarray) -> bool:

@@ -5,31 +5,11 @@ import signal
 
 import numpy as np
 import pytest
+from output_worker_helpers import kill_worker
 
 from mechanism.cosim.record import RunResult, resample
 from mechanism.output import plots, workers
 from mechanism.output.results import write_outputs
-
-
-def kill_worker(w, k: int) -> None:
-    """SIGKILL output worker ``k`` of ``w`` and wait until it is gone (the second is the first's child: its process
-    is gone when it is a zombie or reaped)."""
-    import os
-    import time
-    pid = w.pid(k)
-    os.kill(pid, signal.SIGKILL)
-    if k == 0:
-        w._procs[0].join(5)
-        return
-    deadline = time.monotonic() + 5
-    while time.monotonic() < deadline:
-        try:
-            with open(f"/proc/{pid}/stat") as f:
-                if f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X"):
-                    return
-        except OSError:
-            return
-        time.sleep(0.01)
 
 
 @pytest.fixture(scope="module")
