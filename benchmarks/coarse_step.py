@@ -88,8 +88,8 @@ def worst(got: dict, ref: dict, skip: tuple = ()) -> tuple[float, str]:
 
 def _fit(steps: list[float], errors: list[float]) -> float:
     """Least-squares slope of log(error) against log(step)."""
-    from mechanism.studies.stepsize.tables import log_slope
-    return log_slope(steps, np.maximum(errors, 1e-300))[0]
+    from mechanism.studies.stepsize.tables import observed_order
+    return observed_order(steps, np.maximum(errors, 1e-300))
 
 
 def order(args, rpm: float, balls: int) -> None:

@@ -12,7 +12,7 @@ import pytest
 from mechanism.cosim.record import energy_summary
 from mechanism.output.results import summary
 from mechanism.run import RunConfig, run, run_adaptive
-from mechanism.studies.stepsize.tables import log_slope
+from mechanism.studies.stepsize.tables import observed_order
 
 DAMPING = {"damping_model": 1, "damping_coefficient": 50.0}
 
@@ -21,11 +21,6 @@ def _cosim(scheme, step, revs=0.1, mode="inprocess", **kw):
     r = run(RunConfig(mode=mode, revs=revs, step=step, scheme=scheme, progress=False, settings=DAMPING, **kw))
     assert r.ok, r.message
     return r
-
-
-def _order(steps, errors) -> float:
-    """The observed order: the step-size study's fit (``log_slope``)."""
-    return log_slope(steps, errors)[0]
 
 
 @pytest.fixture(scope="module")
@@ -56,9 +51,9 @@ def test_jacobian_implicit_is_second_order_through_the_start_up(reference_fifth)
         cage.append(float(np.max(np.abs(r["cage_angle"] - ref["cage_angle"][idx]))))
         sel = half[idx]
         peak.append(abs(float(np.max(np.hypot(r["F_x"], r["F_y"])[sel])) / ref_peak - 1.0))
-    print(f"cage errors {cage} order {_order(steps, cage):.2f}; peak errors {peak} order {_order(steps, peak):.2f}")
-    assert _order(steps, cage) >= 1.8, cage
-    assert _order(steps, peak) >= 1.8, peak
+    print(f"cage errors {cage} order {observed_order(steps, cage):.2f}; peak errors {peak} order {observed_order(steps, peak):.2f}")
+    assert observed_order(steps, cage) >= 1.8, cage
+    assert observed_order(steps, peak) >= 1.8, peak
 
 
 def test_secant_ring_speeds_remove_the_cage_angle_error(reference_fifth):

@@ -1,4 +1,5 @@
-"""Issue 12 item 5 for ``law-model`` (mechanism/cosim/coupling/law_model.py): observed order >= 1.8 on the cage angle
+"""Issue 12 item 5 for ``law-model`` (mechanism/cosim/coupling/law_model.py): observed order >= 1.8 (and >= 2.5,
+the third order docs/coupling.md states) on the cage angle
 and on the second-revolution peak joint force, steps 2e-5 ... 2.5e-6 s, against the monolithic reference.
 
 1200 rpm, 8 balls, C = 50 N s/m per ball, two revolutions, in-process endpoint (the FMU path equals it:
@@ -15,16 +16,11 @@ import numpy as np
 import pytest
 
 from mechanism.run import RunConfig, run
-from mechanism.studies.stepsize.tables import log_slope
+from mechanism.studies.stepsize.tables import observed_order
 
 DAMPING = {"damping_model": 1, "damping_coefficient": 50.0}
 STEPS = (2e-5, 1e-5, 5e-6, 2.5e-6)
 REV = 0.05        # one crank revolution at 1200 rpm [s]
-
-
-def _order(steps, errors) -> float:
-    """The observed order: the step-size study's fit (``log_slope``)."""
-    return log_slope(steps, errors)[0]
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +31,7 @@ def reference():
     return r
 
 
-def test_law_model_is_second_order(reference):
+def test_law_model_is_secondobserved_order(reference):
     """The default scheme's order (issue 12 item 5): law-model is the default (DEFAULT_SCHEME)."""
     from mechanism.cosim.coupling import DEFAULT_SCHEME
     assert DEFAULT_SCHEME == "law-model"
@@ -53,7 +49,9 @@ def test_law_model_is_second_order(reference):
         sel = rev2[idx]
         F = np.hypot(r["F_x"], r["F_y"])
         peak.append(abs(float(np.max(F[sel])) / float(np.max(F_ref[idx][sel])) - 1.0))
-    print(f"cage {cage} order {_order(STEPS, cage):.2f}; rev-2 peak {peak} order {_order(STEPS, peak):.2f}")
-    assert _order(STEPS, cage) >= 1.8, cage
-    assert _order(STEPS, peak) >= 1.8, peak
+    print(f"cage {cage} order {observed_order(STEPS, cage):.2f}; rev-2 peak {peak} order {observed_order(STEPS, peak):.2f}")
+    assert observed_order(STEPS, cage) >= 1.8, cage
+    assert observed_order(STEPS, peak) >= 1.8, peak
+    # docs/coupling.md states "about third order" (fits 3.01 and 3.06): held here with a margin
+    assert observed_order(STEPS, cage) >= 2.5 and observed_order(STEPS, peak) >= 2.5, (cage, peak)
     assert cage[-1] < cage[0] / 40 and peak[-1] < peak[0] / 40, (cage, peak)

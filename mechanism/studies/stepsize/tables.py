@@ -4,8 +4,21 @@ from __future__ import annotations
 import math
 from dataclasses import asdict
 from typing import Callable
+
 import numpy as np
-from mechanism.studies.stepsize.cases import (ADAPTIVE, ERROR, ONE_PERCENT, ORDER_CEILING, ORDER_FLOOR, ORDER_METRIC, PEAK_METRIC, SKIPPED, STABLE, StudyConfig)
+
+from mechanism.studies.stepsize.cases import (
+    ADAPTIVE,
+    ERROR,
+    ONE_PERCENT,
+    ORDER_CEILING,
+    ORDER_FLOOR,
+    ORDER_METRIC,
+    PEAK_METRIC,
+    SKIPPED,
+    STABLE,
+    StudyConfig,
+)
 
 
 # ------------------------------------------------------------------------------------- summaries
@@ -18,6 +31,11 @@ def log_slope(steps, errors) -> tuple[float, float]:
     (the study's, the order tests' and ``benchmarks/coarse_step.py``'s)."""
     slope, intercept = np.polyfit(np.log(steps), np.log(errors), 1)
     return float(slope), float(intercept)
+
+
+def observed_order(steps, errors) -> float:
+    """The observed order of convergence: ``log_slope``'s slope."""
+    return log_slope(steps, errors)[0]
 
 
 def fit_order(rows: list[dict], metric: str = ORDER_METRIC, floor: float = ORDER_FLOOR,
