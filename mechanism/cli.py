@@ -196,13 +196,9 @@ def figure_plan(config: RunConfig, ideal: bool):
     """What the run of ``config`` will record in its meta for the figures (``run.run``'s configuration, crank
     period and clearance), with or without an ``ideal`` counterpart, ending at 2 ``revs`` π rad of crank angle:
     ``mechanism.output.figures.Plan``."""
-    from dataclasses import asdict
-
     from mechanism.output.figures import Plan
-    from mechanism.run import clearance_per_side
-    meta = {"config": asdict(config), "crank_period_s": config.crank_period,
-            "clearance_per_side_m": clearance_per_side(config)}
-    return Plan(meta, ideal, 2.0 * config.revs)
+    from mechanism.run import run_meta
+    return Plan(run_meta(config), ideal, 2.0 * config.revs)
 
 
 def ideal_counterpart(config: RunConfig, result, workers=None, sink=None):

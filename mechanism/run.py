@@ -155,6 +155,13 @@ def clearance_per_side(config: RunConfig) -> float:
     return 0.0
 
 
+def run_meta(config: RunConfig) -> dict:
+    """What every run of ``config`` records in its meta before it starts: the configuration, the crank period [s]
+    and the joint's free play per side [m] (the figures' titles and scales read them: ``output.figures.Plan``)."""
+    return {"config": asdict(config), "crank_period_s": config.crank_period,
+            "clearance_per_side_m": clearance_per_side(config)}
+
+
 def contact_law(config: RunConfig) -> BallBearing | None:
     """The ball bearing's law for the iterated scheme's contact-onset correction (None for the journal-clearance
     joint): given to the master whether or not an energy account is recorded (the physics must not depend on it)."""
@@ -253,8 +260,7 @@ def _run(config: RunConfig, sink=None) -> RunResult:
     q0, qd0 = initial_state(system, params)
     observe = _interruptible(slider_crank_observer(system))
     t_end = config.revs * config.crank_period
-    meta = {"config": asdict(config), "crank_period_s": config.crank_period,
-            "clearance_per_side_m": clearance_per_side(config)}
+    meta = run_meta(config)
     label = f"{config.joint} {config.mode} {config.rpm:g} rpm"
     settings = MasterSettings(t_end=t_end, step=config.step, output_interval=config.output_interval,
                               scheme=config.scheme, progress=config.progress, description=label)
@@ -311,8 +317,8 @@ def run_adaptive(config, tol: float, initial_step: float | None = None, **settin
     system = System(model)
     q0, qd0 = initial_state(system, params)
     observe = slider_crank_observer(system)
-    clearance = clearance_per_side(config)
-    meta = {"config": asdict(config), "crank_period_s": config.crank_period, "clearance_per_side_m": clearance}
+    meta = run_meta(config)
+    clearance = meta["clearance_per_side_m"]
     adaptive = AdaptiveSettings(t_end=config.revs * config.crank_period, output_interval=config.output_interval,
                                 scheme=config.scheme, progress=config.progress, tol=tol,
                                 step=initial_step or min(1e-6, config.output_interval),
