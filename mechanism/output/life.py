@@ -34,24 +34,50 @@ def figures(acc: LifeAccumulator, source: str, window: tuple[float, float]) -> d
     return out
 
 
+def accumulator(params: BearingParameters) -> LifeAccumulator:
+    """An empty ``LifeAccumulator`` of the bearing ``params`` (its load ratings, its reliability factor)."""
+    return LifeAccumulator(LoadRatings.of_bearing(params), params.reliability_factor)
+
+
+def ball_load_names(params: BearingParameters) -> list[str]:
+    """The recorded ball-load columns of the bearing ``params``."""
+    return [f"ball_load_{r + 1}" for r in range(int(params.n_balls))]
+
+
+def add_held_samples(acc: LifeAccumulator, t: np.ndarray, loads: np.ndarray, w_i: np.ndarray, w_o: np.ndarray,
+                     previous: float | None, t_start: float = -math.inf, t_end: float = math.inf) -> float | None:
+    """Add the samples k (times ``t``, ball loads [N] ``loads`` (rows), ring speeds [rad/s]) to ``acc``, each held
+    over (t_{k-1}, t_k] within [t_start, t_end] (the FMU's own rule when samples are taken every communication
+    step); ``previous``: the time of the sample before the first (None: the first is not added). A sample with a
+    non-finite load adds nothing. Returns the last time (the next block's ``previous``)."""
+    t, w_i, w_o = np.asarray(t).tolist(), np.asarray(w_i).tolist(), np.asarray(w_o).tolist()
+    finite = np.all(np.isfinite(loads), axis=1).tolist()
+    loads = np.asarray(loads).tolist()
+    for k, tk in enumerate(t):
+        if previous is not None:
+            lo, hi = max(previous, t_start), min(tk, t_end)
+            if hi > lo and finite[k]:
+                acc.add(loads[k], w_i[k], w_o[k], hi - lo)
+        previous = tk
+    return previous
+
+
 def life_from_samples(result, params: BearingParameters, t_start: float = -math.inf,
                       t_end: float = math.inf) -> LifeAccumulator:
     """Accumulate the recorded ball loads of ``result`` (a RunResult) over the window [t_start, t_end]."""
-    acc = LifeAccumulator(LoadRatings.of_bearing(params), params.reliability_factor)
+    acc = accumulator(params)
     t = result["time"]
-    names = [f"ball_load_{r + 1}" for r in range(int(params.n_balls))]
+    names = ball_load_names(params)
     if len(t) < 2 or not all(result.has(n) for n in names):
         return acc
     # only the samples k whose interval (t_{k-1}, t_k] meets the window add (the times rise): their rows alone
     # are stacked, not the whole run's ball loads
     first = max(1, int(np.searchsorted(t, t_start, side="right")))
     stop = min(len(t), int(np.searchsorted(t, t_end, side="left")) + 1)
-    loads = np.column_stack([result[n][first:stop] for n in names]) if stop > first else np.empty((0, len(names)))
-    w_i, w_o = result["omega_inner"], result["omega_outer"]
-    for k in range(first, stop):
-        lo, hi = max(t[k - 1], t_start), min(t[k], t_end)
-        if hi > lo and np.all(np.isfinite(loads[k - first])):
-            acc.add(loads[k - first].tolist(), float(w_i[k]), float(w_o[k]), float(hi - lo))
+    if stop > first:
+        loads = np.column_stack([result[n][first:stop] for n in names])
+        add_held_samples(acc, t[first:stop], loads, result["omega_inner"][first:stop],
+                         result["omega_outer"][first:stop], float(t[first - 1]), t_start, t_end)
     return acc
 
 

@@ -109,9 +109,9 @@ class TableStream:
         self._before: np.ndarray | None = None     # the last row before the window (its first sample's interval)
         self._life = self._life_cols = None
         if self.life_params is not None:
-            from fmu_bearing.life import LifeAccumulator, LoadRatings
-            self._life = LifeAccumulator(LoadRatings.of_bearing(self.life_params), self.life_params.reliability_factor)
-            names = [f"ball_load_{r + 1}" for r in range(int(self.life_params.n_balls))]
+            from mechanism.output.life import accumulator, ball_load_names
+            self._life = accumulator(self.life_params)
+            names = ball_load_names(self.life_params)
             if all(n in self.index for n in names):   # (else nothing is added, as in life_from_samples)
                 self._life_cols = [self.index[n] for n in names]
         self._life_t: float | None = None
@@ -235,20 +235,12 @@ class TableStream:
             self._add_life(block)
 
     def _add_life(self, block: np.ndarray) -> None:
-        """``life.life_from_samples`` over the whole run, a row at a time (the loads of sample k held over
-        (t_{k-1}, t_k])."""
-        t = block[:, 0].tolist()
-        w_i = block[:, self.index["omega_inner"]].tolist()
-        w_o = block[:, self.index["omega_outer"]].tolist()
-        loads = block[:, self._life_cols]
-        finite = np.all(np.isfinite(loads), axis=1).tolist()
-        loads = loads.tolist()
-        previous = self._life_t
-        for k, tk in enumerate(t):
-            if previous is not None and tk - previous > 0 and finite[k]:
-                self._life.add(loads[k], w_i[k], w_o[k], tk - previous)
-            previous = tk
-        self._life_t = previous
+        """``life.life_from_samples`` over the whole run, a block at a time (``life.add_held_samples``: the loads of
+        sample k held over (t_{k-1}, t_k], the last time carried to the next block)."""
+        from mechanism.output.life import add_held_samples
+        self._life_t = add_held_samples(self._life, block[:, 0], block[:, self._life_cols],
+                                        block[:, self.index["omega_inner"]], block[:, self.index["omega_outer"]],
+                                        self._life_t)
 
     def _worst_value(self) -> float:
         if self._worst is None:    # every residual NaN: as ``np.nanargmax`` over the whole column (it raises)
