@@ -40,7 +40,7 @@ from mechanism.cosim import component_call as cc
 from mechanism.cosim import fmu_native
 from mechanism.cosim import law_model_kernel as lmk
 from mechanism.cosim.energy_kernel import stage_integrals
-from mechanism.cosim.law_kernel import HEADER, elastic_energy
+from mechanism.cosim.law_kernel import HEADER, edge_tolerance, elastic_energy
 from mechanism.multibody.kernels import advance, finish, force_of_model
 
 #: failure codes of ``run_steps`` (fail[0]); fail[1] = step, fail[2] = t, fail[3:] the values the message names
@@ -195,8 +195,8 @@ def onset_jumps(P, a, cage_a, b, cage_b, jumps):
     ca, sa, cb, sb = math.cos(cage_a), math.sin(cage_a), math.cos(cage_b), math.sin(cage_b)
     xa, ya = a[1] * ca + a[2] * sa, a[2] * ca - a[1] * sa
     xb, yb = b[1] * cb + b[2] * sb, b[2] * cb - b[1] * sb
-    tol_a = 1e-12 * (half + (abs(a[1]) + abs(a[2])) * (8.0 + abs(cage_a)))
-    tol_b = 1e-12 * (half + (abs(b[1]) + abs(b[2])) * (8.0 + abs(cage_b)))
+    tol_a = edge_tolerance(half, a[1], a[2], cage_a)
+    tol_b = edge_tolerance(half, b[1], b[2], cage_b)
     for r in range(nb):
         cr, sr = P[HEADER + r], P[HEADER + nb + r]
         ea, eb = xa * cr + ya * sr - half, xb * cr + yb * sr - half

@@ -121,6 +121,16 @@ def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, l
     out[9] = f_max
 
 
+@njit(cache=True, inline="always")
+def edge_tolerance(half, e_x, e_y, angle):
+    """The margin [m] beyond which a ball's deflection delta_r = e . u_r - P_d/2 (eq. 18) computed from e in the cage's
+    frame and the table of the balls' places (cos, sin of 2 pi r / nb; one cos, sin per cage ``angle`` [rad]) has the
+    sign of the exact one (its own cos, sin of the ball angle, eq. 17): that shortcut is within |e| 1e-15 (8 + |angle|)
+    of the exact deflection (the rounding of the angles and of a few products), about 1000 times inside this. A ball
+    farther than this from the load zone's edge is settled by the shortcut; the others by the exact arithmetic."""
+    return 1e-12 * (half + (abs(e_x) + abs(e_y)) * (8.0 + abs(angle)))
+
+
 @njit(**LEAF)
 def elastic_energy(P, e_x, e_y, cage_angle):
     """Strain energy of the loaded contacts, sum of (2/5) K delta_r^2.5 [J]: ``BallBearing.elastic_energy``
@@ -132,7 +142,7 @@ def elastic_energy(P, e_x, e_y, cage_angle):
     # others with the exact arithmetic, as before
     c, s = math.cos(cage_angle), math.sin(cage_angle)
     ex, ey = c * e_x + s * e_y, c * e_y - s * e_x
-    tol = 1e-12 * (half + (abs(e_x) + abs(e_y)) * (8.0 + abs(cage_angle)))
+    tol = edge_tolerance(half, e_x, e_y, cage_angle)
     total = 0.0
     for r in range(nb):
         if ex * P[_u(HEADER + r)] + ey * P[_u(HEADER + nb + r)] - half < -tol:

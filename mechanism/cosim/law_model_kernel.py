@@ -23,7 +23,7 @@ import math
 from numba import njit
 
 from fmu_bearing.parameters import DAMPING_CONSTANT
-from mechanism.cosim.law_kernel import HEADER, evaluate
+from mechanism.cosim.law_kernel import HEADER, edge_tolerance, evaluate
 from mechanism.multibody.kernels import (
     LEAF,
     _applied,
@@ -197,8 +197,8 @@ def onset_corrections(LM, P, m, bounds, end, onsets):
         cb0, sb0 = math.cos(pb), math.sin(pb)
         xa, ya = ax * ca0 + ay * sa0, ay * ca0 - ax * sa0          # e in the cage's frame at both bounds
         xb, yb = bx * cb0 + by * sb0, by * cb0 - bx * sb0
-        tol_a = 1e-12 * (half + (abs(ax) + abs(ay)) * (8.0 + abs(pa)))
-        tol_b = 1e-12 * (half + (abs(bx) + abs(by)) * (8.0 + abs(pb)))
+        tol_a = edge_tolerance(half, ax, ay, pa)
+        tol_b = edge_tolerance(half, bx, by, pb)
         g0x = g0y = g1x = g1y = 0.0
         for r in range(nb):
             cr, sr = P[_u(HEADER + r)], P[_u(HEADER + nb + r)]
