@@ -312,9 +312,10 @@ def exit_now(code: int) -> None:
     commands write is closed by then. With another non-daemon thread alive, a normal exit (it waits for it)."""
     import atexit
     others = [t for t in threading.enumerate() if t is not threading.main_thread() and not t.daemon and t.is_alive()]
-    if others:
+    run_exitfuncs = getattr(atexit, "_run_exitfuncs", None)   # (CPython's; without it, the normal exit)
+    if others or run_exitfuncs is None or not (code is None or isinstance(code, int)):
         sys.exit(code)
-    atexit._run_exitfuncs()
+    run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
         try:
             if stream is not None:          # (None: started with that descriptor closed)
@@ -326,7 +327,7 @@ def exit_now(code: int) -> None:
         ctypes.CDLL(None).fflush(None)
     except Exception:  # noqa: BLE001  (no C library by that name: nothing to flush)
         pass
-    os._exit(0 if code is None else code if isinstance(code, int) else 1)    # sys.exit's meaning of None
+    os._exit(0 if code is None else code)    # sys.exit's meaning of None
 
 
 if __name__ == "__main__":

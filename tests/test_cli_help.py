@@ -30,7 +30,7 @@ def test_every_option_has_help_and_no_raw_markup(name):
     assert "``" not in sub.format_help(), name
 
 
-@pytest.mark.parametrize("code, expected", [("0", 0), ("None", 0), ("3", 3)])
+@pytest.mark.parametrize("code, expected", [("0", 0), ("None", 0), ("3", 3), ("'a message'", 1)])
 def test_exit_now_exits_as_sys_exit_even_with_stdout_closed(code, expected):
     """``cli.exit_now`` (no module tear-down) exits with sys.exit's status, also when the process started with its
     standard output closed (``sys.stdout`` None: a reviewer's finding, it raised and exited 1)."""
