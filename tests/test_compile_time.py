@@ -171,3 +171,47 @@ def test_a_first_fmu_run_starts_the_warmup_for_its_own_step(monkeypatch):
     monkeypatch.setattr(compiled_driver, "start_warmup", lambda variant=None: seen.append(variant))
     assert run(RunConfig(revs=0.002, progress=False)).ok
     assert seen == [(True, True)]
+
+
+KERNEL_MODULES = ("mechanism.multibody.kernels", "mechanism.cosim.compiled_loop", "mechanism.cosim.component_call",
+                  "mechanism.cosim.component_kernel", "mechanism.cosim.energy_kernel", "mechanism.cosim.fmu_native",
+                  "mechanism.cosim.law_kernel", "mechanism.cosim.law_model_kernel",
+                  "mechanism.cosim.monolithic_kernel")
+
+
+def _kernels():
+    """Every numba dispatcher defined in the kernel modules: (module name, name, dispatcher)."""
+    import importlib
+
+    from numba.core.registry import CPUDispatcher
+    for name in KERNEL_MODULES:
+        module = importlib.import_module(name)
+        for attr, value in vars(module).items():
+            if isinstance(value, CPUDispatcher) and value.py_func.__module__ == name:
+                yield name, attr, value
+
+
+def test_every_kernel_is_cached_and_compiled_without_the_cfunc_wrapper():
+    """Every kernel goes through ``kernels.KERNEL`` (or ``LEAF``): cached on disk, no C-callable wrapper. A kernel
+    declared with a bare ``@njit(cache=True)`` would compile that wrapper again on every first run."""
+    found = list(_kernels())
+    assert len(found) > 60
+    for module, name, dispatcher in found:
+        assert dispatcher._cache.__class__.__name__ == "FunctionCache", (module, name)
+        assert dispatcher.targetoptions.get("no_cfunc_wrapper") is True, (module, name)
+
+
+def test_a_kernel_for_compiled_callers_refuses_a_python_call():
+    """A kernel compiled without numba's CPython wrapper (``kernels.internal``) raises a TypeError naming itself when
+    Python calls it (numba would jump to the missing wrapper and crash the interpreter); compiled code calls it."""
+    from mechanism.multibody import kernels as kn
+    internal = [(m, n, d) for m, n, d in _kernels() if isinstance(d, kn.CompiledOnly)]
+    assert {("mechanism.cosim.law_model_kernel", "advance"), ("mechanism.multibody.kernels", "_kinematics"),
+            ("mechanism.cosim.compiled_loop", "trial_model"), ("mechanism.cosim.component_kernel", "law_exchange"),
+            } <= {(m, n) for m, n, _ in internal}
+    for module, name, dispatcher in internal:
+        assert dispatcher.targetoptions.get("no_cpython_wrapper") is True, (module, name)
+        with pytest.raises(TypeError, match=f"{module}.{name} is called from compiled kernels only"):
+            dispatcher(np.zeros(3))
+    # compiled callers are unaffected: the first communication steps of a law-model run call several of them
+    assert run(RunConfig(mode="inprocess", revs=0.002, progress=False)).ok

@@ -79,8 +79,8 @@ def test_the_kernels_read_no_stale_workspace(name):
             W, u, dy = np.full(kn.workspace_size(ints), fill), np.zeros(6), np.zeros(2 * n)
             kn.rhs(0.01, y, fm, ints, reals, L, LR, W, u, dy)
             acc, p1, stages = np.zeros(3), np.zeros(3), np.zeros((10, 8))
-            y2, cv, finite = kn.advance(y, 0.0, 1e-5, 2, 2e-5, fm, dy, True, ints, reals, L, LR, W, u, acc, p1,
-                                        stages)
+            y2 = y.copy()
+            cv, finite = kn.advance(y2, 0.0, 1e-5, 2, 2e-5, fm, dy, True, ints, reals, L, LR, W, u, acc, p1, stages)
             lam = np.zeros(system.m)
             kn.finish(y2, u[0], u[1], 3.0, -4.0, ints, reals, L, LR, W, u, dy, lam, np.zeros(0),
                       np.zeros((0, 3), np.int64), np.zeros(0), 2e-5, cv, np.zeros(0, np.int64), p1)

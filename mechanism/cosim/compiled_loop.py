@@ -41,7 +41,13 @@ from mechanism.cosim import fmu_native
 from mechanism.cosim import law_model_kernel as lmk
 from mechanism.cosim.energy_kernel import stage_integrals
 from mechanism.cosim.law_kernel import HEADER, edge_tolerance, elastic_energy
-from mechanism.multibody.kernels import advance, finish, force_of_model
+from mechanism.multibody.kernels import (
+    KERNEL,
+    advance,
+    finish,
+    force_of_model,
+    internal,
+)
 
 #: failure codes of ``run_steps`` (fail[0]); fail[1] = step, fail[2] = t, fail[3:] the values the message names
 #: INPUTS: the in-process law rejected the inputs (fail[3:9]); COMPONENT: the FMU refused a call (fail[3] its
@@ -66,7 +72,7 @@ N_ISET = 20
 MODELS = {"jacobian": 0, "zoh": 1, "extrap1": 2, "extrap2": 3}
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _copy(dst, src, n):
     """dst[:n] = src[:n] for 1-D arrays, as a loop (a slice assignment compiles numba's broadcasting checks and
     their error paths: seconds of the first run's compile, docs/kernels.md)."""
@@ -74,7 +80,7 @@ def _copy(dst, src, n):
         dst[i] = src[i]
 
 
-@njit(cache=True)
+@internal(KERNEL)
 def _copy_rows(dst, src, rows):
     """dst[:rows, :] = src[:rows, :] for 2-D arrays of the same width, as a loop (see ``_copy``)."""
     for i in range(rows):
@@ -82,13 +88,13 @@ def _copy_rows(dst, src, rows):
             dst[i, j] = src[i, j]
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def sym_eig_max(a, b, c):
     """Largest eigenvalue of [[a, b], [b, c]] (``master._sym_eig_max``)."""
     return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def substeps(h, x, mobility, limit, cap):
     """``master.substeps`` for the exchange x (13 fields of ``Exchanged``)."""
     k = max(sym_eig_max(x[7], x[8], x[9]), 0.0)
@@ -100,7 +106,7 @@ def substeps(h, x, mobility, limit, cap):
     return max(1, min(cap, math.ceil(x)))
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def _linear(x, e_x, e_y, v_x, v_y):
     """``coupling.jacobian._linear``: F_x + K (e - e_x) + C (v - v_x) about the exchange x."""
     dx, dy, dvx, dvy = e_x - x[1], e_y - x[2], v_x - x[3], v_y - x[4]
@@ -108,7 +114,7 @@ def _linear(x, e_x, e_y, v_x, v_y):
             x[6] + x[8] * dx + x[9] * dy + x[11] * dvx + x[12] * dvy)
 
 
-@njit(cache=True)
+@internal(KERNEL)
 def drift_model(past, npast, drift_history, fm):
     """The force model of ``jacobian-drift`` (pass 0 of ``jacobian-implicit``): ForceModel.linear(past[-1], d)
     with the previous step's drift d (``InterfaceJacobianDrift.begin_step``) into fm."""
@@ -125,7 +131,7 @@ def drift_model(past, npast, drift_history, fm):
         fm[11 + i] = x[7 + i]
 
 
-@njit(cache=True)
+@internal(KERNEL)
 def hold_model(model, past, npast, fm):
     """The force models of the force-held schemes into fm: ``zoh`` (``ZeroOrderHold``: F_n held), ``extrap1``
     (``LinearExtrapolation``: F_n + (F_n - F_{n-1}) (tau - t_n) / (t_n - t_{n-1})), ``extrap2``
@@ -149,7 +155,7 @@ def hold_model(model, past, npast, fm):
         fm[3], fm[4], fm[5], fm[6] = cbx + qx * w, cby + qy * w, qx, qy
 
 
-@njit(cache=True)
+@internal(KERNEL)
 def trial_model(a, x, jumps, njumps, fm):
     """``InterfaceJacobianImplicit.begin_step`` with a trial: the mean tangent matrices, the step's own drift
     through both ends (start exchange a, the last pass's end x) and the onset jumps' quadratic terms, into fm."""
@@ -172,7 +178,7 @@ def trial_model(a, x, jumps, njumps, fm):
         fm[11 + i] = m[7 + i]
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def converged(a, b, tol, e_scale):
     """``InterfaceJacobianImplicit.converged``: two passes' end force and eccentricity agree to tol."""
     f_scale = max(1.0, abs(b[5]), abs(b[6]))
@@ -180,7 +186,7 @@ def converged(a, b, tol, e_scale):
             and abs(a[1] - b[1]) <= tol * e_scale and abs(a[2] - b[2]) <= tol * e_scale)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def onset_jumps(P, a, cage_a, b, cage_b, jumps):
     """``coupling.implicit.onset_jumps`` (law P of ``law_kernel.pack_bearing``) into the rows of ``jumps``
     (theta, J_x, J_y); returns their count. Constant damping only (eq. 18); the oil film has none."""
@@ -219,7 +225,7 @@ def onset_jumps(P, a, cage_a, b, cage_b, jumps):
     return count
 
 
-@njit(cache=True)
+@internal(KERNEL)
 def same_jumps(a, na, b, nb, tol=1e-3):
     """``master._same_jumps``: the same onsets (count, positions, jumps) within tol."""
     if na != nb:
@@ -231,7 +237,7 @@ def same_jumps(a, na, b, nb, tol=1e-3):
     return True
 
 
-@njit(cache=True)
+@internal(KERNEL)
 def next_pass_negligible(fm, b, mobility, h, tol):
     """``CouplingLoop._next_pass_negligible`` for this pass's force model fm and its end exchange b."""
     if mobility <= 0.0:
@@ -240,7 +246,7 @@ def next_pass_negligible(fm, b, mobility, h, tol):
     return mismatch_negligible(b[5] - fx, b[6] - fy, b, mobility, h, tol)
 
 
-@njit(cache=True)
+@internal(KERNEL)
 def mismatch_negligible(dx, dy, b, mobility, h, tol):
     """``CouplingLoop._next_pass_negligible`` from the end mismatch (dx, dy) [N] of this pass's force model."""
     d = math.hypot(dx, dy) * mobility
@@ -251,7 +257,7 @@ def mismatch_negligible(dx, dy, b, mobility, h, tol):
             and de <= tol * max(1e-6, math.hypot(b[1], b[2])))
 
 
-@njit(cache=True)
+@internal(KERNEL)
 def k1_valid(fm, t0, xin, xf):
     """``CouplingLoop._k1_valid`` once the stored end evaluation belongs to (y, t0)."""
     if fm[0] != t0 or fm[1] != xf[0] or fm[2] != xf[1]:
@@ -264,7 +270,7 @@ def k1_valid(fm, t0, xin, xf):
     return True
 
 
-@njit(cache=True)
+@internal(KERNEL)
 def _push(past, npast, x, history):
     """Append x to the exchange history (``history`` kept: the scheme's deque); returns the new count."""
     row = npast       # loops, not slice assignments (their shape-mismatch error path compiles for seconds: _copy)
@@ -278,7 +284,7 @@ def _push(past, npast, x, history):
     return row + 1
 
 
-@njit(cache=True)
+@internal(KERNEL)
 def _fail(fail, code, step, t, v0, v1, v2, v3, v4, v5):
     """Note a failure in ``fail`` (see OK .. COMPONENT). Callers pass every argument, the code as ``np.int64`` and
     the values as floats: one compiled specialisation (literal codes and omitted defaults made nine)."""
@@ -286,7 +292,7 @@ def _fail(fail, code, step, t, v0, v1, v2, v3, v4, v5):
     fail[3], fail[4], fail[5], fail[6], fail[7], fail[8] = v0, v1, v2, v3, v4, v5
 
 
-@njit(cache=True)
+@internal(KERNEL)
 def _release(kind, H, state, counts) -> int:
     """Free the step's saved component state (``component_call.free``), counted."""
     status = cc.free(kind, H, state)
@@ -294,7 +300,7 @@ def _release(kind, H, state, counts) -> int:
     return status
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, t, fail, counts) -> bool:
     """The component's exchange (``component_call.exchange``), counted; False (``fail`` set) if refused.
     ``P`` None: an FMU, called straight through ``fmu_native`` (``component_call.exchange``'s FMU branch): numba
@@ -313,7 +319,7 @@ def _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, 
     return True
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, stages, probes, scale, react,
               data, cols, P, cs, H, vr_in, vr_out, vr_real, vr_int, vr_bool, PC, PE, past, xin, xf, integrals,
               counts, fset, iset, sent, fail, LM):
@@ -430,11 +436,13 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             for i in range(acc.shape[0]):
                 acc[i] = 0.0
             if LM is not None:
-                y_end, drift, finite = lmk.advance(y, t0, hs, m, t, LM, PC, lout, lloads, onsets, bounds, I, R, L,
-                                                   LR, W, u, acc, p1, stages)
+                y_end = y.copy()
+                drift, finite = lmk.advance(y_end, t0, hs, m, t, LM, PC, lout, lloads, onsets, bounds, I, R, L, LR, W,
+                                            u, acc, stages)
             else:
                 k1v = iset[10] != 0 and k1_valid(fm, t0, xin, xf)
-                y_end, drift, finite = advance(y, t0, hs, m, t, fm, dy, k1v, I, R, L, LR, W, u, acc, p1, stages)
+                y_end = y.copy()
+                drift, finite = advance(y_end, t0, hs, m, t, fm, dy, k1v, I, R, L, LR, W, u, acc, p1, stages)
             if not finite:
                 _fail(fail, np.int64(NOT_FINITE), step, t, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
                 if iterative:

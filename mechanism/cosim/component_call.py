@@ -17,6 +17,7 @@ from numba import njit
 
 from mechanism.cosim import fmu_native
 from mechanism.cosim.component_kernel import CS_CAGE, CS_LOADS, CS_OUT, law_exchange
+from mechanism.multibody.kernels import KERNEL
 
 #: the components (``kind``)
 IN_PROCESS, FMU = 0, 1
@@ -26,7 +27,7 @@ ERROR = 3
 N_COUPLING = 8
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def exchange(kind, P, eccentricity_limit, cs, H, vr_in, vr_out, t0, h, sent, out) -> int:
     """One exchange over [t0, t0 + h] with the inputs ``sent`` held; the coupling outputs into ``out`` (8)."""
     if kind == IN_PROCESS:
@@ -38,7 +39,7 @@ def exchange(kind, P, eccentricity_limit, cs, H, vr_in, vr_out, t0, h, sent, out
     return fmu_native.exchange(H, vr_in, sent, t0, h, vr_out, out)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def save(kind, cs, snap, H):
     """Save the component's state: (status, the FMU state's pointer; 0 in-process: the copy is in ``snap``)."""
     if kind == IN_PROCESS:
@@ -49,7 +50,7 @@ def save(kind, cs, snap, H):
     return status, state
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def restore(kind, cs, snap, H, state) -> int:
     """Roll the component back to the state ``save`` made (it stays valid for another restore)."""
     if kind == IN_PROCESS:
@@ -59,7 +60,7 @@ def restore(kind, cs, snap, H, state) -> int:
     return fmu_native.set_state(H, state)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def free(kind, H, state) -> int:
     """Free the state ``save`` made (nothing to free in-process)."""
     if kind == IN_PROCESS:
@@ -67,7 +68,7 @@ def free(kind, H, state) -> int:
     return fmu_native.free_state(H, state)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def sample(kind, cs, H, vr_real, vr_int, vr_bool, buf) -> int:
     """The component's sampled outputs after the last exchange into ``buf``, in its ``sample_names``' order
     (in-process: cage angle, loaded balls, max ball load, ball loads, as ``InProcessEndpoint.sample``)."""

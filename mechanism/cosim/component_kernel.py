@@ -19,7 +19,7 @@ from numba import njit
 
 from fmu_bearing.life import _CUBE_OF_STATIONARY, _TWO_PI, P_STATIONARY
 from mechanism.cosim.law_kernel import evaluate
-from mechanism.multibody.kernels import LEAF
+from mechanism.multibody.kernels import LEAF, internal
 
 CS_CAGE, CS_INPUTS, CS_OUT, CS_LOADS = 0, 1, 7, 17
 
@@ -81,7 +81,7 @@ def life_add(loads, sums, z, omega_inner, omega_outer, dt):
     sums[3] += dt
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def law_exchange(P, eccentricity_limit, cs, h, sent):
     """One exchange of the in-process component (``InProcessEndpoint.exchange``): check the inputs ``sent``,
     advance the cage over h [s] with the ring speeds held (eq. 16), evaluate the law (eq. 18-19) and add the

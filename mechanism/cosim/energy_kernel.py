@@ -28,13 +28,13 @@ from numba import njit
 from fmu_bearing.ball_bearing import FILM_SPEED_EXPONENT
 from fmu_bearing.parameters import DAMPING_CONSTANT, DAMPING_OIL_FILM
 from mechanism.cosim.law_kernel import HEADER, _oil_film
-from mechanism.multibody.kernels import LEAF, _u
+from mechanism.multibody.kernels import KERNEL, LEAF, _u, internal
 
 #: the RK4 weights of the four stages (times h/6)
 _WEIGHTS = (1.0, 2.0, 2.0, 1.0)
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def _same_row(stages, a, b):
     """True if the stage rows a and b hold the same state (all 8 fields equal)."""
     for i in range(stages.shape[1]):
@@ -43,7 +43,7 @@ def _same_row(stages, a, b):
     return True
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def _row_powers(P, stages, row, j, cage_offset, nb, K, half, constant, oil, w_in, w_out, pd, pt, dl):
     """The per-ball damping powers pd[j], the loaded formula's pt[j] and the deflections dl[j] at the stage row
     ``row`` (the law's arithmetic, eq. 18, 29-32); returns the cage power sum over the balls of w (F_el x e)_z."""
@@ -80,7 +80,7 @@ def _row_powers(P, stages, row, j, cage_offset, nb, K, half, constant, oil, w_in
     return cage_power
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def stage_integrals(P, stages, substeps, hs, cage_offset):
     """(D, W_cage) [J] over ``substeps`` substeps of size hs [s] from the rows of ``stages`` (5 per substep:
     e_x, e_y, v_x, v_y, omega_inner, omega_outer, journal angle, housing angle). ``cage_offset``: the kinematic

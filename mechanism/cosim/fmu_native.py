@@ -41,6 +41,7 @@ from numba.core.errors import TypingError
 from numba.extending import intrinsic
 
 from mechanism.cosim.endpoints import _STATUS, ExchangeError
+from mechanism.multibody.kernels import KERNEL, internal
 
 #: slots of the handle array
 COMPONENT, SET_REAL, DO_STEP, GET_REAL, GET_INTEGER, GET_BOOLEAN, GET_STATE, SET_STATE, FREE_STATE = range(9)
@@ -155,21 +156,21 @@ _int_address = _address_of(types.int32, "integer/boolean values (fmi2Integer, fm
 
 # ---- the calls for njit code ---------------------------------------------------------------------------
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def _missing(H, slot) -> bool:
     """The handle is too short, invalidated, or the FMU lacks the function of ``slot``. Callers pass the slot
     as ``np.int64``: a literal constant would compile one specialisation per slot (first run's compile)."""
     return H.size < SLOTS or H[COMPONENT] == 0 or H[slot] == 0
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def _fits(vr, size, contiguous) -> bool:
     """``vr`` fits values of ``size`` (C-contiguous if ``contiguous``); the values' size and flag, not the array:
     one specialisation for the float64 and the int32 values."""
     return vr.size <= size and vr.flags.c_contiguous and contiguous
 
 
-@njit(cache=True)
+@internal(KERNEL)
 def set_reals(H, vr, values) -> int:
     """fmi2SetReal of ``values[:len(vr)]`` (float64) to ``vr`` (uint32)."""
     if _missing(H, np.int64(SET_REAL)):
@@ -179,7 +180,7 @@ def set_reals(H, vr, values) -> int:
     return _call_arrays(H[SET_REAL], H[COMPONENT], _vr_address(vr), np.int64(vr.size), _real_address(values))
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def get_reals(H, vr, out) -> int:
     """fmi2GetReal of ``vr`` (uint32) into ``out[:len(vr)]`` (float64)."""
     if _missing(H, np.int64(GET_REAL)):
@@ -189,7 +190,7 @@ def get_reals(H, vr, out) -> int:
     return _call_arrays(H[GET_REAL], H[COMPONENT], _vr_address(vr), np.int64(vr.size), _real_address(out))
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def get_integers(H, vr, out) -> int:
     """fmi2GetInteger of ``vr`` (uint32) into ``out[:len(vr)]`` (int32)."""
     if _missing(H, np.int64(GET_INTEGER)):
@@ -199,7 +200,7 @@ def get_integers(H, vr, out) -> int:
     return _call_arrays(H[GET_INTEGER], H[COMPONENT], _vr_address(vr), np.int64(vr.size), _int_address(out))
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def get_booleans(H, vr, out) -> int:
     """fmi2GetBoolean of ``vr`` (uint32) into ``out[:len(vr)]`` (int32: fmi2Boolean is a C int)."""
     if _missing(H, np.int64(GET_BOOLEAN)):
@@ -209,7 +210,7 @@ def get_booleans(H, vr, out) -> int:
     return _call_arrays(H[GET_BOOLEAN], H[COMPONENT], _vr_address(vr), np.int64(vr.size), _int_address(out))
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def do_step(H, t, h) -> int:
     """fmi2DoStep(t, h, noSetFMUStatePriorToCurrentPoint = fmi2True)."""
     if _missing(H, np.int64(DO_STEP)):
@@ -217,7 +218,7 @@ def do_step(H, t, h) -> int:
     return _call_do_step(H[DO_STEP], H[COMPONENT], np.float64(t), np.float64(h), np.int32(1))
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def exchange(H, vr_in, u, t, h, vr_out, out) -> int:
     """One exchange: fmi2SetReal(vr_in, u), fmi2DoStep(t, h, True), fmi2GetReal(vr_out, out); stops at the
     first status above fmi2Warning and returns it (else the last status)."""
@@ -230,7 +231,7 @@ def exchange(H, vr_in, u, t, h, vr_out, out) -> int:
     return get_reals(H, vr_out, out)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def sample_into(H, vr_real, vr_int, vr_bool, row) -> int:
     """The sampled outputs into ``row`` (float64) in ``FmuEndpoint.sample_names``'s order: the reals of
     ``vr_real``, then the integers of ``vr_int``, then the booleans of ``vr_bool`` as 0.0/1.0
@@ -252,7 +253,7 @@ def sample_into(H, vr_real, vr_int, vr_bool, row) -> int:
     return status
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def get_state(H):
     """fmi2GetFMUstate: (status, the new state's pointer as int64; 0 if none was made)."""
     if _missing(H, np.int64(GET_STATE)):
@@ -261,7 +262,7 @@ def get_state(H):
     return status, state
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def set_state(H, state) -> int:
     """fmi2SetFMUstate of the state ``state`` (a pointer from ``get_state``)."""
     if _missing(H, np.int64(SET_STATE)):
@@ -271,7 +272,7 @@ def set_state(H, state) -> int:
     return _call_pointer(H[SET_STATE], H[COMPONENT], np.int64(state))
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def free_state(H, state) -> int:
     """fmi2FreeFMUstate of ``state`` (a pointer from ``get_state``; 0: nothing to free, OK)."""
     if _missing(H, np.int64(FREE_STATE)):

@@ -21,7 +21,7 @@ from fmu_bearing.ball_bearing import (
     BallBearing,
 )
 from fmu_bearing.parameters import DAMPING_CONSTANT, DAMPING_OIL_FILM
-from mechanism.multibody.kernels import LEAF, _u
+from mechanism.multibody.kernels import KERNEL, LEAF, _u, internal
 
 #: P = [n_balls, K, P_d/2, model, C, entrainment, pre_i, h_i, pre_o, h_o, h_min, w_inner, w_outer, cos, sin, cos^2, cos sin, sin^2 (n_balls each)]
 HEADER = 13
@@ -39,7 +39,7 @@ def pack_bearing(bearing: BallBearing) -> np.ndarray:
     return np.array(head + [v for col in cols for v in col], np.float64)
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def _oil_film(P, load, speed):
     """Ball damping C [N s/m] of the inner and outer films in series (eq. 32) and dC/dW [s/m]."""
     h_min = P[10]
@@ -121,7 +121,7 @@ def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, l
     out[9] = f_max
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def edge_tolerance(half, e_x, e_y, angle):
     """The margin [m] beyond which a ball's deflection delta_r = e . u_r - P_d/2 (eq. 18) computed from e in the cage's
     frame and the table of the balls' places (cos, sin of 2 pi r / nb; one cos, sin per cage ``angle`` [rad]) has the

@@ -33,6 +33,7 @@ from mechanism.multibody.kernels import (
     _rotations,
     _stage_row,
     _u,
+    internal,
     max_violation,
     powers,
     prepare,
@@ -47,7 +48,7 @@ LM_FIELDS = ("t", "h", "cage", "omega", "wi", "wo", "c0_x", "c0_y", "c1_x", "c1_
 LM_SIZE = len(LM_FIELDS)
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def _eig_max(a, b, c):
     """Largest eigenvalue of [[a, b], [b, c]] (``law_model._eig_max``)."""
     return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
@@ -73,7 +74,7 @@ def set_cage(LM, P, cage, omega_inner, omega_outer):
     LM[4], LM[5] = omega_inner, omega_outer
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def begin(LM, P, out, loads, a, x, have_trial, h):
     """``LawModel.begin_step`` from the start exchange a (13 fields of ``Exchanged``) and, if ``have_trial``, the
     last pass's end exchange x: a new step's stiffest tangent (the start's, the law at the predicted end), c_n
@@ -107,7 +108,7 @@ def substep_tangent(LM, a, xs):
         xs[10 + i] = r * LM[14 + i]
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def at_least(LM, m, cap):
     """``LawModel.set_substeps``' count: m, at least ``min_substeps`` (at most cap) once the law met a contact."""
     if LM[10] > 0.0 and m < LM[19]:
@@ -115,14 +116,14 @@ def at_least(LM, m, cap):
     return m
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def end_mismatch(LM, P, out, loads, b):
     """``LawModel.end_mismatch`` on the first pass: the end exchange b's force against the law there plus c_n."""
     evaluate(P, b[1], b[2], b[3], b[4], LM[2] + LM[3] * (b[0] - LM[0]), LM[4], LM[5], out, loads)
     return b[5] - (out[0] + LM[6]), b[6] - (out[1] + LM[7])
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def any_onset(LM, P, m, bounds, end, onsets):
     """``LawModel.end_mismatch``'s condition: a contact onset to correct in this pass's substeps (``onsets`` is
     overwritten: the next pass builds its own)."""
@@ -242,20 +243,13 @@ def force(LM, P, out, loads, onsets, bounds, tau, e_x, e_y, v_x, v_y, sub, stage
     return fx + LM[6] + r * (LM[8] - LM[6]), fy + LM[7] + r * (LM[9] - LM[7])
 
 
-@njit(cache=True)
-def advance(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R, L, LR, W, u, acc, p1, stages):
+@internal(LEAF)
+def advance(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R, L, LR, W, u, acc, stages):
     """``kernels.advance`` (same arithmetic, the energy account's stages and powers) with the law-model's force
-    at every stage, the first included (the master's RK4 calls ``force`` four times per substep)."""
-    y = y.copy()
-    drift, finite = _substeps(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R, L, LR, W, u, acc,
-                              stages)
-    return y, drift, finite
-
-
-@njit(**LEAF)
-def _substeps(y, t0, hs, substeps, t_end, LM, P, out, loads, onsets, bounds, I, R, L, LR, W, u, acc, stages):
-    """``advance``'s substeps on y in place (allocating nothing: no reference counting around its calls); returns
-    the end state's max |Phi| and whether it is finite."""
+    at every stage, the first included (the master's RK4 calls ``force`` four times per substep), on y in place
+    (allocating nothing: no reference counting around its calls; ``run_steps`` passes a copy); returns the end
+    state's max |Phi| and whether it is finite. No wrapper around it: each level of compiled calls re-optimises
+    and re-emits the machine code of everything below it (docs/kernels.md, "Fifth pass")."""
     N = y.shape[0]
     ork = _layout(I)[9]                  # in W: the four stages' dy/dt, the stage state, the stages' powers
     yt = W[ork + 4 * N:ork + 5 * N]

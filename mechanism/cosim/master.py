@@ -323,17 +323,14 @@ class CouplingLoop:
         if fm is not None:     # the compiled step (kinematics of the end state included)
             if self._end[0] is not y:
                 self._end = (None, None)
-            if self.integrals is None:   # the account's arrays also without one (see __init__): same state
-                y, drift, finite = self._kn.advance(y, t0, hs, m, t, fm, self._dy, self._k1_valid(y, t0, fm),
-                                                    self._I, self._R, self._L, self._LR, self._W, self._u,
-                                                    self._acc, self._p1, self._stages)
-            else:
+            if self.integrals is not None:   # the account's arrays also without one (see __init__): same state
                 self._acc[:] = 0.0
-                y, drift, finite = self._kn.advance(y, t0, hs, m, t, fm, self._dy, self._k1_valid(y, t0, fm),
-                                                    self._I, self._R, self._L, self._LR, self._W, self._u,
-                                                    self._acc, self._p1, self._stages)
-                if finite:
-                    self._energy_step(m, hs, finish)
+            k1_valid = self._k1_valid(y, t0, fm)
+            y = y.copy()     # advanced in place
+            drift, finite = self._kn.advance(y, t0, hs, m, t, fm, self._dy, k1_valid, self._I, self._R, self._L,
+                                             self._LR, self._W, self._u, self._acc, self._p1, self._stages)
+            if finite and self.integrals is not None:
+                self._energy_step(m, hs, finish)
         elif self.integrals is not None and endpoint is not None:   # the NumPy reference with the account
             y = self._advance_with_energy(y, t0, hs, m, finish)
             finite = bool(np.all(np.isfinite(y)))

@@ -24,6 +24,7 @@ from mechanism.cosim.joint import BearingLink
 from mechanism.cosim.law_kernel import evaluate, pack_bearing
 from mechanism.multibody import kernels as kn
 from mechanism.multibody.kernels import (
+    KERNEL,
     _add_link_force,
     _applied,
     _kinematics,
@@ -53,7 +54,7 @@ class Arrays:
         self.limit = float(bearing.eccentricity_limit)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def rhs(t, y, I, R, L, LR, P, W, u, out, loads, limit, energy_states, dy):
     """dy/dt at (t, y) into dy; the law's output of the state in ``out`` (F, K, C, loaded balls, max load), its
     ball loads in ``loads``, the bearing inputs in u and lambda (internal order) in W. Returns the status."""
@@ -88,7 +89,7 @@ def rhs(t, y, I, R, L, LR, P, W, u, out, loads, limit, energy_states, dy):
     return OK
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def deflections(y, I, L, LR, W, u, half, out):
     """delta_r = e . u_r - P_d/2 [m] of every ball at y (``coupling.implicit.ball_deflections``: ball angles
     cage + 2 pi r / N_b, eq. 17-18) into out; the bearing inputs of y in u."""

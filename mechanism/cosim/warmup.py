@@ -77,7 +77,7 @@ LAW_MODEL = (
     (lmk.at_least, (_F1, _I, _I)),
     (lmk.end_mismatch, (_F1, _F1, _F1, _F1, _F1)),
     (lmk.any_onset, (_F1, _F1, _I, _F2, _F1, _F2)),
-    (lmk.advance, (_F1, _F, _F, _I, _F, _F1, _F1, _F1, _F1, _F2, _F2, _I1, _F1, _I1, _F1, _F1, _F1, _F1, _F1, _F2)),
+    (lmk.advance, (_F1, _F, _F, _I, _F, _F1, _F1, _F1, _F1, _F2, _F2, _I1, _F1, _I1, _F1, _F1, _F1, _F1, _F2)),
 )
 #: the stages in the order compiled: (name, functions). The energy account's kernels come last: the run's process
 #: compiles them itself after ``finish`` (about when this process is done with the step's stages), so a first run

@@ -52,11 +52,39 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.core.registry import CPUDispatcher
 
-#: the options of the kernels that allocate nothing: compiled without numba's reference counting (``_nrt``), so
+#: the options of every kernel: cached on disk, and without the C-callable wrapper numba otherwise generates with
+#: each compiled function (``no_cfunc_wrapper``: it serves passing a kernel as a first-class function value, which
+#: nothing here does, and cost its share of a first run's compile; the kernel's own code is the same)
+KERNEL = {"cache": True, "no_cfunc_wrapper": True}
+#: the options of the kernels that allocate nothing: also compiled without numba's reference counting (``_nrt``), so
 #: that a call passes its arrays without the atomic increments and decrements around it (a tenth of the law-model
 #: step's time when they were counted; the arithmetic is the same)
-LEAF = {"cache": True, "_nrt": False}
+LEAF = {**KERNEL, "_nrt": False}
+
+
+class CompiledOnly(CPUDispatcher):
+    """A kernel compiled without numba's CPython wrapper (``internal``): compiled code calls it as any kernel; a call
+    from Python, which would jump to a wrapper that does not exist, is refused here."""
+
+    def __call__(self, *args, **kwargs):
+        raise TypeError(f"{self.py_func.__module__}.{self.py_func.__qualname__} is called from compiled kernels only "
+                        "(it has no Python entry: mechanism.multibody.kernels.internal)")
+
+
+def internal(options: dict):
+    """``@njit(**options)`` for a kernel that only other kernels call (none from Python, tests included): compiled
+    without the CPython wrapper (numba's ``no_cpython_wrapper``, as numba's own internal kernels are). The wrapper
+    unboxes every argument from Python objects; for the helpers of the step, with up to 20 arrays, those wrappers
+    were about a tenth of a first run's compile (docs/kernels.md, "Fifth pass"). The dispatcher becomes a
+    ``CompiledOnly``, which refuses a call from Python with a TypeError instead of crashing the interpreter."""
+    def decorate(func):
+        dispatcher = njit(**options, no_cpython_wrapper=True)(func)
+        if isinstance(dispatcher, CPUDispatcher):   # not under NUMBA_DISABLE_JIT (a plain function then)
+            dispatcher.__class__ = CompiledOnly
+        return dispatcher
+    return decorate
 
 H_I = 8   # header length of I
 H_D = 16  # length of the directory of the sparsity lists in I
@@ -146,7 +174,7 @@ def workspace_size(ints: np.ndarray) -> int:
 _u = np.uint64
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def _layout(I):
     """Offsets in W: (phi, gamma, rhs, lambda, Phi_t, S, Q, M^-1 Q, cos/sin, RK4 stages); Phi_q is at 0."""
     nb, n, m = I[0], I[1], I[2]
@@ -171,7 +199,7 @@ def _rotations(y, I, W):
     W[_u(o + 2 * nb + 1)] = 0.0
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def _body_point(y, n, nb, b, sx, sy, c, s):
     """(omega, u_x, u_y, x, y, xd, yd): u = A s' of a point on body b (eq. 10) and the body's state
     (q = y[:n], qd = y[n:]), given c, s = cos, sin of its angle; ground (b = nb): u = s', the rest 0."""
@@ -181,7 +209,7 @@ def _body_point(y, n, nb, b, sx, sy, c, s):
     return (y[_u(v + 2)], c * sx - s * sy, s * sx + c * sy, y[_u(o)], y[_u(o + 1)], y[_u(v)], y[_u(v + 1)])
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def _kinematics(y, t, I, R, W):
     """Phi (eq. 3), Phi_q, gamma (eq. 5) and Phi_t (eq. 4) of the state y = [q, qd] in internal row order,
     written in W; the rotations (``_rotations``) of y must be in W."""
@@ -359,7 +387,7 @@ def _solve(y, I, R, W, dy):
         dy[_u(n + i)] = v
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def accelerations(q, qd, t, Q, I, R, W, qdd):
     """Kinematics and eq. (9) for the state (q, qd, t) and applied forces Q: qdd written, lambda in W."""
     n = I[1]
@@ -375,7 +403,7 @@ def accelerations(q, qd, t, Q, I, R, W, qdd):
         qdd[i] = dy[n + i]
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def _in_model_order(I, W, offset, out):
     """The constraint rows of W from ``offset`` (kernel row order) into ``out`` in model order."""
     otm = H_I + 3 * I[3] + 2 * I[4]
@@ -383,7 +411,7 @@ def _in_model_order(I, W, offset, out):
         out[k] = W[offset + I[otm + k]]
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def multipliers(I, W, lam_model):
     """Lambda of the last solve, in model order."""
     _in_model_order(I, W, _layout(I)[3], lam_model)
@@ -408,7 +436,7 @@ def max_violation(I, W):
 
 
 # ---------------------------------------------------------------------------------- force joint
-@njit(**LEAF)
+@internal(LEAF)
 def _point(y, n, nb, b, sx, sy, W, ocs):
     """(x, y, xd, yd) of a point s' on body b (eq. 10-12) with the body's cos, sin in W; ground: (s', 0)."""
     w, ux, uy, x, yy, xd, yd = _body_point(y, n, nb, b, sx, sy, W[_u(ocs + 2 * b)], W[_u(ocs + 2 * b + 1)])
@@ -432,7 +460,7 @@ def _link_inputs(y, I, L, LR, W, u):
     u[5] = y[_u(n + 3 * hb + 2)] if hb < nb else 0.0
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def _add_point_force(W, oQ, y, nb, b, fx, fy, ax, ay):
     """Generalized force of F = (fx, fy) applied at (ax, ay) on body b into Q = W[oQ:] (eq. 20-23)."""
     if b >= nb:
@@ -443,7 +471,7 @@ def _add_point_force(W, oQ, y, nb, b, fx, fy, ax, ay):
     W[_u(oQ + i + 2)] += (ax - y[_u(i)]) * fy - (ay - y[_u(i + 1)]) * fx
 
 
-@njit(**LEAF)
+@internal(LEAF)
 def _add_link_force(y, I, L, LR, W, ex, ey, fx, fy):
     """Generalized forces of F on the housing body and -F on the journal body into Q in W, eq. (20)-(23);
     the rotations of y (``_rotations``) must be in W."""
@@ -463,7 +491,7 @@ def _add_link_force(y, I, L, LR, W, ex, ey, fx, fy):
     _add_point_force(W, oQ, y, nb, jb, -fx, -fy, xj, yj)
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def force_of_model(fm, tau, ex, ey, vx, vy):
     """F(tau, e, v) = F0 + a1 s + a2 s^2 + K (e - e0) + C (v - v0) (``ForceModel``)."""
     s = tau - fm[0]
@@ -473,7 +501,7 @@ def force_of_model(fm, tau, ex, ey, vx, vy):
 
 
 # ---------------------------------------------------------------------------------- the step
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def _applied(I, R, W):
     """Q^A of gravity [N, N, N m] into Q in W."""
     n, K, A = I[1], I[3], I[4]
@@ -483,7 +511,7 @@ def _applied(I, R, W):
         W[_u(oQ + i)] = R[_u(o + i)]
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def rhs(tau, y, fm, I, R, L, LR, W, u, dy):
     """dy/dt = [qd, qdd] with the force joint's force given by the force model fm: ``stage_inputs``, the force
     at those inputs, ``stage_derivative``."""
@@ -494,7 +522,7 @@ def rhs(tau, y, fm, I, R, L, LR, W, u, dy):
     stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy)
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def stage_inputs(y, I, R, L, LR, W, u):
     """The first half of ``rhs`` (and of ``mechanism.cosim.law_model_kernel``'s stages, whose force the caller
     gives): the rotations and Q^A of y into W and its bearing inputs into u (eq. 10-12)."""
@@ -504,7 +532,7 @@ def stage_inputs(y, I, R, L, LR, W, u):
         _link_inputs(y, I, L, LR, W, u)
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy):
     """The second half of ``rhs`` after ``stage_inputs``: dy/dt = [qd, qdd] with the force joint's force (fx, fy)
     at the inputs u (eq. 20-23)."""
@@ -517,7 +545,7 @@ def stage_derivative(tau, y, fx, fy, I, R, L, LR, W, u, dy):
     _solve(y, I, R, W, dy)
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def powers(y, I, R, W):
     """The powers [W] at the state y whose right-hand side was just evaluated (kinematics, lambda and Q in W):
     of the drivers lambda . Phi_t (the rheonomic constraints' work, e.g. the crank's M omega), of the applied
@@ -538,7 +566,7 @@ def powers(y, I, R, W):
     return drive, app, total - app
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def _stage_row(stages, row, y, u, nb, L):
     """The energy account's record of a stage state: its bearing inputs u and the ring angles (journal, housing)."""
     q = _u(row)
@@ -548,10 +576,13 @@ def _stage_row(stages, row, y, u, nb, L):
     stages[q, 7] = y[3 * L[1] + 2] if L[1] < nb else 0.0
 
 
-@njit(cache=True)
+@njit(**LEAF)
 def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc=None, p1=None, stages=None):
-    """``substeps`` RK4 steps of size hs from (t0, y) under the force model fm; returns the new state
-    its constraint violation max |Phi| (one kinematics evaluation per state) and whether it is finite.
+    """``substeps`` RK4 steps of size hs from (t0, y) under the force model fm, on y in place (the caller passes a
+    copy where it keeps the start); returns the end state's constraint violation max |Phi| (one kinematics
+    evaluation per state) and whether it is finite. It allocates nothing (``LEAF``: no reference counting around
+    its calls), and no wrapper copies y around it: each level of compiled calls re-optimises and re-emits the
+    machine code of everything below it (docs/kernels.md, "Fifth pass").
 
     k1: dy/dt at (t0, y) if ``k1_valid`` (the end-of-step evaluation of the previous step, shared).
     On return W holds the kinematics of the end state at t_end (= t0 + substeps * hs, as the caller
@@ -564,15 +595,6 @@ def advance(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc
     ``stages`` (5 substeps x 8): per substep, rows of its four stage states and its end state (``_stage_row``),
     for the bearing side of the account (``mechanism.cosim.energy``).
     """
-    y = y.copy()
-    drift, finite = _substeps(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc, p1, stages)
-    return y, drift, finite
-
-
-@njit(**LEAF)
-def _substeps(y, t0, hs, substeps, t_end, fm, k1, k1_valid, I, R, L, LR, W, u, acc, p1, stages):
-    """``advance``'s substeps on y in place (allocating nothing: no reference counting around its calls); returns
-    the end state's max |Phi| and whether it is finite."""
     N = y.shape[0]
     ork = _layout(I)[9]                  # in W: the four stages' dy/dt, the stage state, the stages' powers
     yt = W[ork + 4 * N:ork + 5 * N]
@@ -682,7 +704,7 @@ def finish(y, ex, ey, fx, fy, I, R, L, LR, W, u, dy, lam, row, probes, scale, t,
         fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, kinetic_energy(y, I, R), n)
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, ke, n):
     """Write the probes of a sample: row[probes[k, 0]] = scale[k] * source[probes[k, 2]] with source
     probes[k, 1]: 0 q, 1 qd, 2 qdd, 3 lambda (model order), 4 bearing inputs of y, 5 force (index 0 x,
@@ -710,7 +732,7 @@ def fill_row(row, probes, scale, y, dy, lam, u, fx, fy, t, cv, ke, n):
         row[c] = scale[k] * v
 
 
-@njit(cache=True, inline="always")
+@njit(**KERNEL, inline="always")
 def kinetic_energy(y, I, R):
     """T = qd^T M qd / 2 [J] of the state y = [q, qd]."""
     n, K, A = I[1], I[3], I[4]
