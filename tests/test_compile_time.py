@@ -64,11 +64,16 @@ print("\\n".join(names))
 
 
 def test_warmup_compiles_what_run_steps_calls(tmp_path):
-    """In a fresh cache, after ``mechanism.cosim.warmup``, the run's compile of ``run_steps`` loads the loop's
-    functions and their callees from the cache (the warm-up's argument types are run_steps' own): the run compiles
-    only run_steps and the multibody kernels it calls from Python before the first chunk."""
+    """In a fresh cache, after ``mechanism.cosim.warmup`` with the stages an in-process law-model run needs
+    (``warmup.needed``), the run's compile of ``run_steps`` loads the loop's functions and their callees from the
+    cache (the warm-up's argument types are run_steps' own): the run compiles only run_steps and the multibody
+    kernels it calls from Python before the first chunk. Nothing of the other schemes' force models (the
+    ``force-model`` stage, not warmed here) is compiled into law-model's step."""
+    from mechanism.cosim import warmup
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), PYTHONPATH=str(ROOT), MECHANISM_COMPILE_WORKER="0")
-    subprocess.run([sys.executable, "-m", "mechanism.cosim.warmup"], env=env, cwd=ROOT, check=True)
+    assert "force-model" not in warmup.needed(False, True)
+    stages = [*warmup.needed(False, True), "energy"]     # (the energy account's: the run calls them from Python)
+    subprocess.run([sys.executable, "-m", "mechanism.cosim.warmup", *stages], env=env, cwd=ROOT, check=True)
     out = subprocess.run([sys.executable, "-c", _COMPILED_IN_RUN], env=env, cwd=ROOT, capture_output=True,
                          text=True, check=True).stdout.split()
     loop_side = ("mechanism.cosim.compiled_loop.", "mechanism.cosim.component_call.",
@@ -93,16 +98,16 @@ def test_the_run_waits_only_for_the_stages_its_step_needs(monkeypatch):
     (an FMU run with jacobian-implicit: not the in-process law's nor law-model's) and ends the worker then."""
     from mechanism.cosim import warmup
     monkeypatch.setattr(compiled_driver, "_variant", (True, False))
-    assert warmup.needed(True, False) == ["loop", "advance", "fmu"]
-    worker = "import time\nfor s in ('loop', 'advance', 'fmu'):\n    print(s, flush=True)\ntime.sleep(60)"
+    assert warmup.needed(True, False) == ["loop", "fmu", "force-model", "advance"]
+    worker = "import time\nfor s in ('loop', 'advance', 'fmu', 'force-model'):\n    print(s, flush=True)\ntime.sleep(60)"
     process = compiled_driver.collect_stages(subprocess.Popen([sys.executable, "-c", worker],
                                                               stdout=subprocess.PIPE, text=True))
     start = time.monotonic()
     compiled_driver.finish_warmup(process, timeout=50.0)
     assert time.monotonic() - start < 30.0
-    assert process.poll() is not None and process.done == {"loop", "advance", "fmu"}
+    assert process.poll() is not None and process.done == {"loop", "advance", "fmu", "force-model"}
     monkeypatch.setattr(compiled_driver, "_variant", (False, True))     # in-process law-model: it would wait
-    assert set(warmup.needed(False, True)) == {"loop", "advance", "in-process", "law-model"}
+    assert set(warmup.needed(False, True)) == {"loop", "in-process", "law-model"}
 
 
 @pytest.mark.parametrize("executable", [None, "", "/bin/sleep"])
@@ -140,10 +145,14 @@ def test_the_warmup_compiles_only_the_stages_of_the_runs_step(variant, monkeypat
     assert len(started) == 1
     asked = started[0][started[0].index("mechanism.cosim.warmup") + 1:]
     wanted = warmup.needed(*variant) if variant is not None else []
-    assert asked == [name for name in wanted if name not in warmup.RUN_SHARE]     # the rest: the run's own share
+    later = warmup.later(*variant) if variant is not None else []
+    assert asked == [name for name in wanted if name not in warmup.RUN_SHARE] + later   # the rest: the run's share
     assert compiled_driver._variant == variant
-    if variant == (True, True):
-        assert "in-process" not in asked and "law-model" in asked and "advance" not in asked
+    if variant == (True, True):     # the headline: the ideal counterpart's advance last, after the step's stages
+        assert "in-process" not in asked and "law-model" in asked and "force-model" not in asked
+        assert asked[-1] == "advance"
+    if variant == (True, False):    # another scheme: its step calls advance, which the run compiles itself
+        assert "advance" not in asked and "force-model" in asked
 
 
 def test_the_run_compiles_its_share_then_waits_for_the_rest(monkeypatch):
@@ -153,15 +162,54 @@ def test_the_run_compiles_its_share_then_waits_for_the_rest(monkeypatch):
     from mechanism.cosim import warmup
     compiled = []
     monkeypatch.setattr(warmup, "compile_stages", lambda names, done: [compiled.append(n) or done(n) for n in names])
-    monkeypatch.setattr(compiled_driver, "_variant", (True, True))
-    worker = "import time\nfor s in ('loop', 'fmu', 'law-model'):\n    print(s, flush=True)\ntime.sleep(60)"
+    monkeypatch.setattr(compiled_driver, "_variant", (True, False))
+    worker = "import time\nfor s in ('loop', 'fmu', 'force-model'):\n    print(s, flush=True)\ntime.sleep(60)"
     process = compiled_driver.collect_stages(subprocess.Popen([sys.executable, "-c", worker],
                                                               stdout=subprocess.PIPE, text=True))
     process.share = ["advance"]
     start = time.monotonic()
     compiled_driver.finish_warmup(process, timeout=50.0)
     assert time.monotonic() - start < 30.0 and compiled == ["advance"]
-    assert process.poll() is not None and process.done == {"loop", "advance", "fmu", "law-model"}
+    assert process.poll() is not None and process.done == {"loop", "advance", "fmu", "force-model"}
+
+
+def _worker(lines: str, monkeypatch):
+    """A stand-in warm-up process printing the stages ``lines`` (a Python statement list), then sleeping."""
+    process = compiled_driver.collect_stages(subprocess.Popen([sys.executable, "-c", f"import time\n{lines}\n"
+                                                               "time.sleep(60)"], stdout=subprocess.PIPE, text=True))
+    monkeypatch.setattr(compiled_driver, "_later", None)
+    return process
+
+
+def test_the_warmup_compiles_the_ideal_counterparts_advance_while_the_run_compiles_its_step(monkeypatch):
+    """A law-model run does not wait for ``kernels.advance`` (``warmup.later``: its step does not call it): the
+    worker is kept (``_later``) while the run compiles ``run_steps``, and ``await_later``, before the ideal
+    counterpart's run, waits for that stage, then ends the worker."""
+    monkeypatch.setattr(compiled_driver, "_variant", (True, True))
+    process = _worker("for s in ('loop', 'fmu', 'law-model'):\n    print(s, flush=True)\ntime.sleep(1.5)\n"
+                      "print('advance', flush=True)", monkeypatch)
+    compiled_driver.finish_warmup(process, timeout=50.0)
+    assert compiled_driver._later is process and process.poll() is None
+    assert "advance" not in process.done
+    compiled_driver.await_later(timeout=50.0)
+    assert "advance" in process.done and process.poll() is not None and compiled_driver._later is None
+    compiled_driver.await_later()        # nothing left: nothing happens
+
+
+def test_a_warmup_that_never_finishes_its_later_stage_is_ended(monkeypatch):
+    """``await_later`` waits at most its timeout (the run then compiles what it calls itself); a worker whose later
+    stages are done already is not kept."""
+    monkeypatch.setattr(compiled_driver, "_variant", (True, True))
+    process = _worker("for s in ('loop', 'fmu', 'law-model'):\n    print(s, flush=True)", monkeypatch)
+    compiled_driver.finish_warmup(process, timeout=50.0)
+    assert compiled_driver._later is process
+    start = time.monotonic()
+    compiled_driver.await_later(timeout=0.5)
+    assert 0.4 < time.monotonic() - start < 10.0 and process.poll() is not None and compiled_driver._later is None
+    done = _worker("for s in ('loop', 'fmu', 'law-model', 'advance'):\n    print(s, flush=True)", monkeypatch)
+    time.sleep(0.5)
+    compiled_driver.finish_warmup(done, timeout=50.0)
+    assert compiled_driver._later is None and done.poll() is not None
 
 
 def test_a_first_fmu_run_starts_the_warmup_for_its_own_step(monkeypatch):
@@ -209,8 +257,11 @@ def test_a_kernel_for_compiled_callers_refuses_a_python_call():
     assert {("mechanism.cosim.law_model_kernel", "advance"), ("mechanism.multibody.kernels", "_kinematics"),
             ("mechanism.cosim.compiled_loop", "trial_model"), ("mechanism.cosim.component_kernel", "law_exchange"),
             } <= {(m, n) for m, n, _ in internal}
+    assert len(internal) == 28      # docs/kernels.md, "Fifth pass"
+    for module, name, dispatcher in _kernels():     # no Python entry exactly where a Python call is refused
+        assert isinstance(dispatcher, kn.CompiledOnly) == bool(dispatcher.targetoptions.get("no_cpython_wrapper")), \
+            (module, name)
     for module, name, dispatcher in internal:
-        assert dispatcher.targetoptions.get("no_cpython_wrapper") is True, (module, name)
         with pytest.raises(TypeError, match=f"{module}.{name} is called from compiled kernels only"):
             dispatcher(np.zeros(3))
     # compiled callers are unaffected: the first communication steps of a law-model run call several of them

@@ -8,6 +8,7 @@ FMU, the law not compiled, the kernels off) the Python loop (the reference) runs
 """
 from __future__ import annotations
 
+import atexit
 import contextlib
 import math
 import os
@@ -115,6 +116,7 @@ def start_warmup(variant: tuple[bool, bool] | None = None) -> subprocess.Popen |
     from mechanism.cosim import warmup
     wanted = warmup.needed(*variant) if variant is not None else []
     stages = [name for name in wanted if name not in warmup.RUN_SHARE]
+    stages += warmup.later(*variant) if variant is not None else []
     root = str(Path(__file__).resolve().parents[2])     # the folder holding the mechanism package imported here
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
     try:    # its own session: a Ctrl-C at the terminal reaches the run, which ends the process itself
@@ -158,12 +160,19 @@ def collect_stages(process: subprocess.Popen) -> subprocess.Popen:
     return process
 
 
+#: a first run's warm-up process left compiling the stages its run calls later (``warmup.later``), or None
+_later: subprocess.Popen | None = None
+
+
 def finish_warmup(process: subprocess.Popen | None, timeout: float = 300.0,
                   poll: Callable[[], None] | None = None) -> None:
     """Wait for ``start_warmup``'s process (at most ``timeout`` s; 0: not at all) until it has compiled the stages
     the step of the last ``CompiledLoop`` needs (``warmup.needed``; all of them before one is made), calling
-    ``poll`` (e.g. the run's signal check, which may raise) every 0.1 s; end the process if it still runs then
-    (the stages it was still compiling are needed by other components or schemes only).
+    ``poll`` (e.g. the run's signal check, which may raise) every 0.1 s. Then the process is ended, unless it
+    has the stages the run calls later still to compile (``warmup.later``: a law-model run's ideal counterpart's
+    ``kernels.advance``, while this process compiles ``run_steps``): it is kept in ``_later`` then, for
+    ``await_later`` (and ended at exit at the latest). The other stages it may still be compiling are needed by other
+    components or schemes only.
 
     Before waiting, this process compiles the stages left to it (``process.share``, ``warmup.RUN_SHARE``): the
     two processes then end their parts at about the same time."""
@@ -171,7 +180,9 @@ def finish_warmup(process: subprocess.Popen | None, timeout: float = 300.0,
         return
     from mechanism.cosim import warmup
     names = warmup.needed(*_variant) if _variant is not None else [name for name, _ in warmup.STAGES]
+    later = warmup.later(*_variant) if _variant is not None else []
     deadline = time.monotonic() + timeout
+    keep = False
     try:
         share = [name for name in getattr(process, "share", ()) if name in names]
         if timeout > 0 and share:
@@ -187,15 +198,49 @@ def finish_warmup(process: subprocess.Popen | None, timeout: float = 300.0,
                     return
                 if poll is not None:
                     poll()
+        keep = not set(later) <= getattr(process, "done", set())
     finally:
-        if process.poll() is None:
-            process.kill()
-            process.wait()
-        reader = getattr(process, "reader", None)
-        if reader is not None:      # at the end of the process's output now
-            reader.join(1.0)
-        if process.stdout is not None and (reader is None or not reader.is_alive()):
-            process.stdout.close()
+        if keep and process.poll() is None:
+            global _later
+            end_warmup(_later)
+            _later, process.later = process, later
+            atexit.register(end_warmup, process)
+        else:
+            end_warmup(process)
+
+
+def await_later(timeout: float = 120.0) -> None:
+    """Before a run that may call what a first run's warm-up process is still compiling (``_later``: the stages of
+    ``warmup.later``): wait until they are in the cache or the process has ended (at most ``timeout`` s), then end
+    it. Without such a process nothing happens; after the timeout the run compiles what it calls itself."""
+    global _later
+    process, _later = _later, None
+    if process is None:
+        return
+    deadline = time.monotonic() + timeout
+    try:
+        while not set(process.later) <= getattr(process, "done", set()) and time.monotonic() < deadline:
+            try:
+                process.wait(min(0.1, max(0.0, deadline - time.monotonic())))
+                return
+            except subprocess.TimeoutExpired:
+                pass
+    finally:
+        end_warmup(process)
+
+
+def end_warmup(process: subprocess.Popen | None) -> None:
+    """End a warm-up process (killed if it still runs) and its output reader."""
+    if process is None:
+        return
+    if process.poll() is None:
+        process.kill()
+        process.wait()
+    reader = getattr(process, "reader", None)
+    if reader is not None:      # at the end of the process's output now
+        reader.join(1.0)
+    if process.stdout is not None and (reader is None or not reader.is_alive()):
+        process.stdout.close()
 
 
 #: the run_steps variants (P None, LM None) this process has called (compiled or loaded from the cache)
@@ -298,6 +343,8 @@ class CompiledLoop:
             fset[15] = scheme.min_substeps
         # law-model's state (zeroed by each chunk), or None: the step compiled without law-model's
         self.LM = np.zeros(lmk.LM_SIZE) if self.law_model else None
+        # the other schemes' force model (zeroed by each chunk), or None: the step compiled without them
+        self.FM = None if self.law_model else np.zeros(17)
         global _variant
         _variant = (self.P is None, self.law_model)
         self.fset = fset
@@ -349,7 +396,7 @@ class CompiledLoop:
                              loop._probe_scale, loop._react, rec.data, self.cols, self.P, self.cs, self.H,
                              self.refs.inputs, self.refs.coupling, self.refs.real_samples, self.refs.int_samples,
                              self.refs.bool_samples, self.PC, self.PE, self.past, self.xin, self.xf, self.integrals,
-                             self.counts, self.fset, self.iset, self.sent, self.fail, self.LM)
+                             self.counts, self.fset, self.iset, self.sent, self.fail, self.LM, self.FM)
         code = int(self.fail[0])
         if code == cl.OK:
             self.steps_done, self.t = last, last * self.h

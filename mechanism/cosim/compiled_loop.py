@@ -322,7 +322,7 @@ def _exchange(kind, P, ecc_limit, cs, H, vr_in, vr_out, t0, h, sent, out, step, 
 @njit(**KERNEL)
 def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, stages, probes, scale, react,
               data, cols, P, cs, H, vr_in, vr_out, vr_real, vr_int, vr_bool, PC, PE, past, xin, xf, integrals,
-              counts, fset, iset, sent, fail, LM):
+              counts, fset, iset, sent, fail, LM, FM):
     """Communication steps ``first`` .. ``last`` from the state y at t = (first - 1) h; returns the state
     reached (the last step's end, or the start of the step that failed: ``fail[0]`` != OK then).
 
@@ -334,10 +334,14 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
     onsets (empty: none); ``PE``: the energy account's law. ``past`` (3 x 13) with iset[13] entries, ``xin`` and
     ``xf``: the history, last inputs and force of the loop (updated in place). ``sent``: the last inputs sent.
 
-    Two arguments may be None, and numba then compiles a step without what they select (it prunes a branch on an
-    argument that is None before typing it): ``P`` None for an FMU (no in-process law), ``LM`` None for a scheme
-    other than law-model; else ``LM`` is law-model's state (``law_model_kernel.LM_SIZE``), zeroed here with its
-    resolution fset[14]. So a run compiles, and a warm run loads, the step of its own component and scheme only.
+    Three arguments may be None, and numba then compiles a step without what they select (it prunes a branch on an
+    argument that is None before typing it, but not one on an array: ``if LM is not None`` keeps both sides when LM
+    is an array): ``P`` None for an FMU (no in-process law); for law-model, ``LM`` its state
+    (``law_model_kernel.LM_SIZE``, zeroed here with its resolution fset[14]) and ``FM`` None; for the other
+    schemes ``LM`` None and ``FM`` their force model's coefficients (17, ``kernels.force_of_model``; zeroed here).
+    Every branch between the two is an ``if`` on the one that is None, so a run compiles, and a warm run loads,
+    the step of its own component and scheme only (law-model's without the force models, ``kernels.advance`` and
+    their helpers, about 3 s of a first run's compile).
     """
     mobility, sub_limit, max_cv, tol = fset[0], fset[1], fset[2], fset[3]
     max_sub, limit, predict, iterative, secant = iset[0], iset[1], iset[2] != 0, iset[3] != 0, iset[4] != 0
@@ -353,13 +357,15 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
             LM[i] = 0.0
         LM[18] = fset[14]
         LM[19] = fset[15]
+    if FM is not None:
+        for i in range(FM.shape[0]):
+            FM[i] = 0.0
     lout = np.zeros(10)
     lloads = np.zeros(max(nb_c, 1))
     onsets = np.zeros((max(max_sub, 1), 5))
     bounds = np.zeros((max(max_sub, 1) + 1, 4))
     xs = np.zeros(13)
     trial_jumps = np.zeros((max(nb_c, 1), 3))
-    fm = np.zeros(17)
     x = np.zeros(13)
     start = np.zeros(13)
     prev = np.zeros(13)
@@ -420,13 +426,13 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                     for k in range(m):
                         onsets[k, 4] = 0.0
                 LM[17] = m
-            else:
+            if FM is not None:   # the other schemes: their force model over the step
                 if model != 0:
-                    hold_model(model, past, npast, fm)
+                    hold_model(model, past, npast, FM)
                 elif have_trial:
-                    trial_model(past[npast - 1], trial, trial_jumps, ntrial, fm)
+                    trial_model(past[npast - 1], trial, trial_jumps, ntrial, FM)
                 else:
-                    drift_model(past, npast, drift_history, fm)
+                    drift_model(past, npast, drift_history, FM)
                 m = substeps(h, past[npast - 1], mobility, sub_limit, max_sub) if model == 0 else 1
             counts[0] = max(counts[0], m)
             counts[1] += m
@@ -439,10 +445,10 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                 y_end = y.copy()
                 drift, finite = lmk.advance(y_end, t0, hs, m, t, LM, PC, lout, lloads, onsets, bounds, I, R, L, LR, W,
                                             u, acc, stages)
-            else:
-                k1v = iset[10] != 0 and k1_valid(fm, t0, xin, xf)
+            if FM is not None:
+                k1v = iset[10] != 0 and k1_valid(FM, t0, xin, xf)
                 y_end = y.copy()
-                drift, finite = advance(y_end, t0, hs, m, t, fm, dy, k1v, I, R, L, LR, W, u, acc, p1, stages)
+                drift, finite = advance(y_end, t0, hs, m, t, FM, dy, k1v, I, R, L, LR, W, u, acc, p1, stages)
             if not finite:
                 _fail(fail, np.int64(NOT_FINITE), step, t, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
                 if iterative:
@@ -502,8 +508,8 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
                     if accept:
                         mx, my = lmk.end_mismatch(LM, PC, lout, lloads, end)
                         accept = mismatch_negligible(mx, my, end, mobility, h, tol)
-                else:
-                    accept = next_pass_negligible(fm, end, mobility, h, tol)
+                if FM is not None:
+                    accept = next_pass_negligible(FM, end, mobility, h, tol)
                 if accept:
                     counts[6] += 1
                     break

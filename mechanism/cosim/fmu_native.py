@@ -10,7 +10,7 @@ fmpy loads the FMU's binary, instantiates, initialises, terminates and frees it 
   (slave, callbacks, endpoint), so they live as long as ``H`` does.
 * ``endpoint_references(endpoint)``: the value references an endpoint exchanges and samples, as uint32 arrays.
 * ``exchange``, ``set_reals``, ``do_step``, ``get_reals``, ``get_integers``, ``get_booleans``, ``sample_into``,
-  ``get_state``, ``set_state``, ``free_state``: ``@njit(cache=True)`` functions callable from other njit code. They return
+  ``get_state``, ``set_state``, ``free_state``: ``@njit(**KERNEL)`` functions (cached) callable from other njit code. They return
   the fmi2Status (0 OK, 1 warning, 2 discard, 3 error, 4 fatal) or ``BAD_ARGUMENT`` (array sizes or layout
   wrong, nothing called) / ``NO_FUNCTION`` (the FMU lacks the function, or ``H`` is invalidated or not a whole
   handle; nothing called); ``check`` raises the
@@ -41,7 +41,7 @@ from numba.core.errors import TypingError
 from numba.extending import intrinsic
 
 from mechanism.cosim.endpoints import _STATUS, ExchangeError
-from mechanism.multibody.kernels import KERNEL, internal
+from mechanism.multibody.kernels import KERNEL
 
 #: slots of the handle array
 COMPONENT, SET_REAL, DO_STEP, GET_REAL, GET_INTEGER, GET_BOOLEAN, GET_STATE, SET_STATE, FREE_STATE = range(9)
@@ -170,7 +170,7 @@ def _fits(vr, size, contiguous) -> bool:
     return vr.size <= size and vr.flags.c_contiguous and contiguous
 
 
-@internal(KERNEL)
+@njit(**KERNEL)
 def set_reals(H, vr, values) -> int:
     """fmi2SetReal of ``values[:len(vr)]`` (float64) to ``vr`` (uint32)."""
     if _missing(H, np.int64(SET_REAL)):

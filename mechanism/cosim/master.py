@@ -30,6 +30,7 @@ driver (``mechanism.cosim.adaptive``), which also uses its ``snapshot``/``restor
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass
 from typing import Callable, Protocol, Sequence
 
@@ -610,6 +611,9 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     bar = tqdm(total=n_steps, desc=settings.description, unit="step", disable=not settings.progress,
                mininterval=0.5, leave=False)
     poll = getattr(observe, "poll", None) if loop.kernels and loop._observe_in_kernel else None
+    driver = sys.modules.get("mechanism.cosim.compiled_driver")
+    if loop.kernels and driver is not None:   # a first run's warm-up may still compile a kernel this run calls
+        driver.await_later()
     warmup = None
     if settings.compiled_loop and getattr(endpoint, "kind", None) in ("in-process", "fmu"):
         from mechanism.cosim import compiled_driver

@@ -39,26 +39,28 @@ ENERGY = (
     (stage_integrals, (_F1, _F2, _I, _F, _F)),
 )
 #: (function, argument types) as ``run_steps`` calls them, for every component and scheme; their callees (the life
-#: sums, the FMU's state calls, the scheme's helpers) compile with them
+#: sums, the FMU's state calls) compile with them
 LOOP = (
     (cl._release, (_I, _I1, _I, _I1)),
     (cc.save, (_I, _F1, _F1, _I1)),
     (cc.restore, (_I, _F1, _F1, _I1, _I)),
     (cc.sample, (_I, _F1, _I1, _U1, _U1, _U1, _F1)),
-    (cl.hold_model, (_I, _F2, _I, _F1)),
-    (cl.trial_model, (_F1, _F1, _F2, _I, _F1)),
-    (cl.drift_model, (_F2, _I, _B, _F1)),
     (cl.substeps, (_F, _F1, _F, _F, _I)),
-    (cl.k1_valid, (_F1, _F, _F1, _F1)),
     (cl._push, (_F2, _I, _F1, _I)),
     (cl.converged, (_F1, _F1, _F, _F)),
     (cl.onset_jumps, (_F1, _F1, _F, _F1, _F, _F2)),
     (cl.same_jumps, (_F2, _I, _F2, _I, types.Omitted(1e-3))),
-    (cl.next_pass_negligible, (_F1, _F1, _F, _F, _F)),
-    (cl.mismatch_negligible, (_F, _F, _F1, _F, _F, _F)),
     (cl._fail, (_F1, _I, _I, _F, _F, _F, _F, _F, _F, _F)),
     (cl._copy, (_F1, _F1, _I)),
     (cl._copy_rows, (_F2, _F2, _I)),
+)
+#: the force models of every scheme but law-model (``run_steps``' FM not None) and their pass checks
+FORCE_MODEL = (
+    (cl.hold_model, (_I, _F2, _I, _F1)),
+    (cl.trial_model, (_F1, _F1, _F2, _I, _F1)),
+    (cl.drift_model, (_F2, _I, _B, _F1)),
+    (cl.k1_valid, (_F1, _F, _F1, _F1)),
+    (cl.next_pass_negligible, (_F1, _F1, _F, _F, _F)),
 )
 #: the RK4 step (``kernels.advance``, with the energy account's arrays) as ``run_steps`` calls it
 ADVANCE = ((kernels.advance, (_F1, _F, _F, _I, _F, _F1, _F1, _B, _I1, _F1, _I1, _F1, _F1, _F1, _F1, _F1, _F2)),)
@@ -68,6 +70,7 @@ FMU = ((cl._exchange, (_I, _N, *_EXCHANGE[2:])),)
 IN_PROCESS = ((cl._exchange, _EXCHANGE),)
 #: law-model's step (law_model_kernel; its RK4 compiles the multibody stage kernels with it)
 LAW_MODEL = (
+    (cl.mismatch_negligible, (_F, _F, _F1, _F, _F, _F)),
     (lmk.set_cage, (_F1, _F1, _F, _F, _F)),
     (lmk.begin, (_F1, _F1, _F1, _F1, _F1, _F1, _B, _F)),
     (lmk.substep_tangent, (_F1, _F1, _F1)),
@@ -82,37 +85,45 @@ LAW_MODEL = (
 #: the stages in the order compiled: (name, functions). The energy account's kernels come last: the run's process
 #: compiles them itself after ``finish`` (about when this process is done with the step's stages), so a first run
 #: does not wait for them; they are here for a warm-up run by itself (``python -m mechanism.cosim.warmup``)
-STAGES = (("loop", LOOP), ("advance", ADVANCE), ("fmu", FMU), ("in-process", IN_PROCESS), ("law-model", LAW_MODEL),
-          ("energy", ENERGY))
+STAGES = (("loop", LOOP), ("force-model", FORCE_MODEL), ("advance", ADVANCE), ("fmu", FMU), ("in-process", IN_PROCESS),
+          ("law-model", LAW_MODEL), ("energy", ENERGY))
 #: the functions every run's step calls (the rest: ``needed``)
 SIGNATURES = tuple(sig for _, stage in STAGES for sig in stage)
 
 
 def needed(fmu: bool, law_model: bool) -> list[str]:
-    """The stages the step of a run needs: through an FMU or in-process, with law-model's or another scheme."""
-    return ["loop", "advance", "fmu" if fmu else "in-process"] + (["law-model"] if law_model else [])
+    """The stages the step of a run needs (``run_steps``): through an FMU or in-process, law-model's step or another
+    scheme's force models with ``kernels.advance``."""
+    return ["loop", "fmu" if fmu else "in-process"] + (["law-model"] if law_model else ["force-model", "advance"])
 
 
-#: the stages the run's process compiles itself, after its own kernels and before it waits for this process (the
-#: two cores of a first run balanced: the run's process would otherwise wait idle for law-model's stage here, then
-#: compile run_steps; ``kernels.advance``'s callees are in its cache already from ``finish``, and its ideal
-#: counterpart calls ``advance`` anyway). docs/kernels.md, "The first run's compile"
+def later(fmu: bool, law_model: bool) -> list[str]:
+    """The stages a run calls after its step, from Python, that its step does not need: ``kernels.advance`` for a
+    law-model run (the ideal counterpart's Python loop). This process compiles them after ``needed``'s while the
+    run's process compiles ``run_steps``; the run does not wait for them (``compiled_driver.await_later``)."""
+    return ["advance"] if law_model else []
+
+
+#: the stages the run's process compiles itself when its step needs them, after its own kernels and before it waits
+#: for this process (the two cores of a first run balanced; ``kernels.advance``'s callees are in its cache already
+#: from ``finish``). docs/kernels.md, "The first run's compile"
 RUN_SHARE = ("advance",)
 
 
 def compile_stages(names, done=None) -> None:
-    """Compile (or load from the cache) the stages ``names`` in ``STAGES``' order; ``done(name)`` after each."""
-    for name, stage in STAGES:
-        if name in names:
-            for function, args in stage:
-                function.compile(args)
-            if done is not None:
-                done(name)
+    """Compile (or load from the cache) the stages ``names`` in their order (``start_warmup`` puts ``later``'s last);
+    ``done(name)`` after each."""
+    stages = dict(STAGES)
+    for name in names:
+        for function, args in stages[name]:
+            function.compile(args)
+        if done is not None:
+            done(name)
 
 
 def main(names: list[str] | None = None) -> None:
-    """Compile (or load from the cache) the stages ``names`` (default: all) in ``STAGES``' order, printing each
-    stage's name when it is in the cache."""
+    """Compile (or load from the cache) the stages ``names`` in their order (default: all, in ``STAGES``' order),
+    printing each stage's name when it is in the cache."""
     compile_stages([name for name, _ in STAGES] if names is None else names, lambda name: print(name, flush=True))
 
 

@@ -28,8 +28,8 @@ radius, journal radius]``); its force over a communication step is a coupling sc
 
 The equations and their numbers are those of ``solver.py`` (Xu et al. 2012 eq. 3-9, Baumgarte
 stabilisation) and ``mechanism.cosim.joint`` (eq. 10-12, 13-15, 20-23); see those modules for
-the derivations. Every kernel is ``@njit(cache=True)``: compiled once per machine and kept on
-disk next to this file (``__pycache__``). The kernels that allocate nothing (``LEAF``) are compiled without
+the derivations. Every kernel is ``@njit(**KERNEL)`` (or ``LEAF``; ``internal`` for those only compiled code calls):
+compiled once per machine and kept on disk (``mechanism.kernel_cache``). The kernels that allocate nothing (``LEAF``) are compiled without
 numba's reference counting, and the hot ones index with unsigned indices (``_u``): both only remove work around
 the arithmetic (atomic increments around each call, the wraparound of a negative index on each access), the
 numbers are the same bit for bit (the headline's outputs compare equal with ``cmp``).
