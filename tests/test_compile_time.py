@@ -173,6 +173,10 @@ def test_the_run_compiles_its_share_then_waits_for_the_rest(monkeypatch):
     assert process.poll() is not None and process.done == {"loop", "advance", "fmu", "force-model"}
 
 
+def _raise_interrupt():
+    raise KeyboardInterrupt
+
+
 def _worker(lines: str, monkeypatch):
     """A stand-in warm-up process printing the stages ``lines`` (a Python statement list), then sleeping."""
     process = compiled_driver.collect_stages(subprocess.Popen([sys.executable, "-c", f"import time\n{lines}\n"
@@ -190,9 +194,13 @@ def test_the_warmup_compiles_the_ideal_counterparts_advance_while_the_run_compil
                       "print('advance', flush=True)", monkeypatch)
     compiled_driver.finish_warmup(process, timeout=50.0)
     assert compiled_driver._later is process and process.poll() is None
+    compiled_driver.finish_warmup(process, 0)      # run_master's end calls it again: the kept worker is left alone
+    assert compiled_driver._later is process and process.poll() is None
     assert "advance" not in process.done
-    compiled_driver.await_later(timeout=50.0)
+    polled = []
+    compiled_driver.await_later(timeout=50.0, poll=lambda: polled.append(1))
     assert "advance" in process.done and process.poll() is not None and compiled_driver._later is None
+    assert polled      # the run's signal check while it waited
     compiled_driver.await_later()        # nothing left: nothing happens
 
 
@@ -203,11 +211,18 @@ def test_a_warmup_that_never_finishes_its_later_stage_is_ended(monkeypatch):
     process = _worker("for s in ('loop', 'fmu', 'law-model'):\n    print(s, flush=True)", monkeypatch)
     compiled_driver.finish_warmup(process, timeout=50.0)
     assert compiled_driver._later is process
+    with pytest.raises(KeyboardInterrupt):     # a noted signal ends the wait, and the worker with it
+        compiled_driver.await_later(timeout=50.0, poll=_raise_interrupt)
+    assert process.poll() is not None and compiled_driver._later is None
+    process = _worker("for s in ('loop', 'fmu', 'law-model'):\n    print(s, flush=True)", monkeypatch)
+    compiled_driver.finish_warmup(process, timeout=50.0)
     start = time.monotonic()
     compiled_driver.await_later(timeout=0.5)
     assert 0.4 < time.monotonic() - start < 10.0 and process.poll() is not None and compiled_driver._later is None
     done = _worker("for s in ('loop', 'fmu', 'law-model', 'advance'):\n    print(s, flush=True)", monkeypatch)
-    time.sleep(0.5)
+    deadline = time.monotonic() + 30.0
+    while len(done.done) < 4 and time.monotonic() < deadline:     # all four read before finish_warmup looks
+        time.sleep(0.05)
     compiled_driver.finish_warmup(done, timeout=50.0)
     assert compiled_driver._later is None and done.poll() is not None
 

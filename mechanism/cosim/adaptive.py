@@ -61,6 +61,7 @@ from mechanism.cosim.master import (
     MasterSettings,
     Observer,
     RunFailure,
+    await_warmup,
     finish,
 )
 from mechanism.cosim.record import Recorder, RunResult
@@ -106,6 +107,7 @@ def run_adaptive(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Adap
     n_out = int(round(settings.t_end / dt_out))
     h_max = min(settings.h_max or dt_out, dt_out)
     loop = CouplingLoop(system, settings, observe, link, endpoint, energy=energy, contact_law=contact_law)
+    await_warmup(loop)      # a first run's warm-up still compiling kernels.advance, which this loop calls
     rec = Recorder(loop.columns, n_out + 2)
     info = dict(meta or {})
     info.update(output_interval_s=dt_out, t_end_s=n_out * dt_out, scheme="adaptive", inner_scheme=loop.scheme.name,

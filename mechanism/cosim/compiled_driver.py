@@ -176,7 +176,8 @@ def finish_warmup(process: subprocess.Popen | None, timeout: float = 300.0,
 
     Before waiting, this process compiles the stages left to it (``process.share``, ``warmup.RUN_SHARE``): the
     two processes then end their parts at about the same time."""
-    if process is None:
+    global _later
+    if process is None or process is _later:     # (kept already: run_master's end calls this again)
         return
     from mechanism.cosim import warmup
     names = warmup.needed(*_variant) if _variant is not None else [name for name, _ in warmup.STAGES]
@@ -201,7 +202,6 @@ def finish_warmup(process: subprocess.Popen | None, timeout: float = 300.0,
         keep = not set(later) <= getattr(process, "done", set())
     finally:
         if keep and process.poll() is None:
-            global _later
             end_warmup(_later)
             _later, process.later = process, later
             atexit.register(end_warmup, process)
@@ -209,10 +209,11 @@ def finish_warmup(process: subprocess.Popen | None, timeout: float = 300.0,
             end_warmup(process)
 
 
-def await_later(timeout: float = 120.0) -> None:
+def await_later(timeout: float = 120.0, poll: Callable[[], None] | None = None) -> None:
     """Before a run that may call what a first run's warm-up process is still compiling (``_later``: the stages of
-    ``warmup.later``): wait until they are in the cache or the process has ended (at most ``timeout`` s), then end
-    it. Without such a process nothing happens; after the timeout the run compiles what it calls itself."""
+    ``warmup.later``): wait until they are in the cache or the process has ended (at most ``timeout`` s), calling
+    ``poll`` (the run's signal check, which may raise) every 0.1 s, then end it. Without such a process nothing
+    happens; after the timeout the run compiles what it calls itself."""
     global _later
     process, _later = _later, None
     if process is None:
@@ -224,7 +225,8 @@ def await_later(timeout: float = 120.0) -> None:
                 process.wait(min(0.1, max(0.0, deadline - time.monotonic())))
                 return
             except subprocess.TimeoutExpired:
-                pass
+                if poll is not None:
+                    poll()
     finally:
         end_warmup(process)
 

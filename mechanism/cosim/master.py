@@ -611,9 +611,6 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
     bar = tqdm(total=n_steps, desc=settings.description, unit="step", disable=not settings.progress,
                mininterval=0.5, leave=False)
     poll = getattr(observe, "poll", None) if loop.kernels and loop._observe_in_kernel else None
-    driver = sys.modules.get("mechanism.cosim.compiled_driver")
-    if loop.kernels and driver is not None:   # a first run's warm-up may still compile a kernel this run calls
-        driver.await_later()
     warmup = None
     if settings.compiled_loop and getattr(endpoint, "kind", None) in ("in-process", "fmu"):
         from mechanism.cosim import compiled_driver
@@ -621,6 +618,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
             law_model = bool(getattr(loop.scheme, "uses_law", False) and loop.contact_law is not None)
             warmup = compiled_driver.start_warmup((endpoint.kind == "fmu", law_model))
     try:
+        await_warmup(loop, None if poll is None else lambda: poll(0.0))
         if warmup is not None:
             bar.set_postfix_str("compiling kernels (first run)")
         loop.start(y)
@@ -669,6 +667,16 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
         if warmup is not None:   # not waited for (the Python loop ran, or a failure before the first chunk): end it
             compiled_driver.finish_warmup(warmup, 0)
     return finish(rec, info, "completed", "", endpoint, bar, loop)
+
+
+def await_warmup(loop: CouplingLoop, poll: Callable[[], None] | None = None) -> None:
+    """Before a run whose Python code calls the kernels: wait for a first run's warm-up process that is still
+    compiling one of them (``compiled_driver.await_later``: a law-model run's ideal counterpart's
+    ``kernels.advance``), calling ``poll`` as it waits; nothing if there is none (only ``compiled_driver`` starts
+    one, so without it imported there is none)."""
+    driver = sys.modules.get("mechanism.cosim.compiled_driver")
+    if loop.kernels and driver is not None:
+        driver.await_later(poll=poll)
 
 
 def finish(rec: Recorder, info: dict, status: str, message: str, endpoint, bar, loop: CouplingLoop) -> RunResult:

@@ -8,8 +8,11 @@ and the first sample, then the energy account's kernels; this process compiles, 
 loop's own functions, ``kernels.advance`` (by then the callees it shares with ``finish`` are mostly in the cache)
 and the component's exchange, printing each stage's name when it is done (about as long on an idle machine). The
 run waits (``compiled_driver.finish_warmup``) only for the stages its step needs (``needed``: an FMU run's step has
-no in-process law, and only law-model's has law-model's functions), ends this process then, and its compile of
-``run_steps`` loads these functions from the cache instead of compiling them.
+no in-process law, only law-model's has law-model's functions, only the other schemes' their force models), and
+its compile of ``run_steps`` loads these functions from the cache instead of compiling them. This process is ended
+then, unless it has the stages the run calls later still to compile (``later``: a law-model run's ideal
+counterpart's ``kernels.advance``), which it compiles while the run compiles ``run_steps``
+(``compiled_driver.await_later`` waits for them before the run that calls them).
 
 Each function is compiled for the argument types its caller gives it (``run_steps``, or the run's Python calls
 for the energy account); tests/test_compile_time.py holds them against the run's: a different type would only mean
