@@ -177,21 +177,30 @@ def _raise_interrupt():
     raise KeyboardInterrupt
 
 
-def _worker(lines: str, monkeypatch):
-    """A stand-in warm-up process printing the stages ``lines`` (a Python statement list), then sleeping."""
-    process = compiled_driver.collect_stages(subprocess.Popen([sys.executable, "-c", f"import time\n{lines}\n"
-                                                               "time.sleep(60)"], stdout=subprocess.PIPE, text=True))
+@pytest.fixture
+def stand_in(monkeypatch):
+    """Stand-in warm-up processes: ``stand_in(lines)`` starts one printing the stages ``lines`` (a Python statement
+    list), then sleeping; every one is ended after the test, passed or not."""
+    started = []
     monkeypatch.setattr(compiled_driver, "_later", None)
-    return process
+
+    def start(lines: str):
+        process = compiled_driver.collect_stages(subprocess.Popen(
+            [sys.executable, "-c", f"import time\n{lines}\ntime.sleep(60)"], stdout=subprocess.PIPE, text=True))
+        started.append(process)
+        return process
+    yield start
+    for process in started:
+        compiled_driver.end_warmup(process)
 
 
-def test_the_warmup_compiles_the_ideal_counterparts_advance_while_the_run_compiles_its_step(monkeypatch):
+def test_the_warmup_compiles_the_ideal_counterparts_advance_while_the_run_compiles_its_step(monkeypatch, stand_in):
     """A law-model run does not wait for ``kernels.advance`` (``warmup.later``: its step does not call it): the
     worker is kept (``_later``) while the run compiles ``run_steps``, and ``await_later``, before the ideal
     counterpart's run, waits for that stage, then ends the worker."""
     monkeypatch.setattr(compiled_driver, "_variant", (True, True))
-    process = _worker("for s in ('loop', 'fmu', 'law-model'):\n    print(s, flush=True)\ntime.sleep(1.5)\n"
-                      "print('advance', flush=True)", monkeypatch)
+    process = stand_in("for s in ('loop', 'fmu', 'law-model'):\n    print(s, flush=True)\ntime.sleep(1.5)\n"
+                      "print('advance', flush=True)")
     compiled_driver.finish_warmup(process, timeout=50.0)
     assert compiled_driver._later is process and process.poll() is None
     compiled_driver.finish_warmup(process, 0)      # run_master's end calls it again: the kept worker is left alone
@@ -204,22 +213,22 @@ def test_the_warmup_compiles_the_ideal_counterparts_advance_while_the_run_compil
     compiled_driver.await_later()        # nothing left: nothing happens
 
 
-def test_a_warmup_that_never_finishes_its_later_stage_is_ended(monkeypatch):
+def test_a_warmup_that_never_finishes_its_later_stage_is_ended(monkeypatch, stand_in):
     """``await_later`` waits at most its timeout (the run then compiles what it calls itself); a worker whose later
     stages are done already is not kept."""
     monkeypatch.setattr(compiled_driver, "_variant", (True, True))
-    process = _worker("for s in ('loop', 'fmu', 'law-model'):\n    print(s, flush=True)", monkeypatch)
+    process = stand_in("for s in ('loop', 'fmu', 'law-model'):\n    print(s, flush=True)")
     compiled_driver.finish_warmup(process, timeout=50.0)
     assert compiled_driver._later is process
     with pytest.raises(KeyboardInterrupt):     # a noted signal ends the wait, and the worker with it
         compiled_driver.await_later(timeout=50.0, poll=_raise_interrupt)
     assert process.poll() is not None and compiled_driver._later is None
-    process = _worker("for s in ('loop', 'fmu', 'law-model'):\n    print(s, flush=True)", monkeypatch)
+    process = stand_in("for s in ('loop', 'fmu', 'law-model'):\n    print(s, flush=True)")
     compiled_driver.finish_warmup(process, timeout=50.0)
     start = time.monotonic()
     compiled_driver.await_later(timeout=0.5)
     assert 0.4 < time.monotonic() - start < 10.0 and process.poll() is not None and compiled_driver._later is None
-    done = _worker("for s in ('loop', 'fmu', 'law-model', 'advance'):\n    print(s, flush=True)", monkeypatch)
+    done = stand_in("for s in ('loop', 'fmu', 'law-model', 'advance'):\n    print(s, flush=True)")
     deadline = time.monotonic() + 30.0
     while len(done.done) < 4 and time.monotonic() < deadline:     # all four read before finish_warmup looks
         time.sleep(0.05)
@@ -281,3 +290,24 @@ def test_a_kernel_for_compiled_callers_refuses_a_python_call():
             dispatcher(np.zeros(3))
     # compiled callers are unaffected: the first communication steps of a law-model run call several of them
     assert run(RunConfig(mode="inprocess", revs=0.002, progress=False)).ok
+
+
+def test_the_ideal_counterparts_run_waits_for_the_kept_worker_and_ends_it(monkeypatch, stand_in):
+    """The wiring: a run whose Python loop calls the kernels (the ideal joint's, as ``cli.ideal_counterpart`` runs it)
+    waits for the worker a first run kept (``run_master`` -> ``await_warmup`` -> ``await_later``) and ends it."""
+    process = stand_in("time.sleep(1.0)\nprint('advance', flush=True)")
+    process.later = ["advance"]
+    monkeypatch.setattr(compiled_driver, "_later", process)
+    assert run(RunConfig(joint="ideal", revs=0.002, progress=False)).ok
+    assert "advance" in process.done and process.poll() is not None and compiled_driver._later is None
+
+
+def test_a_failed_or_interrupted_run_drops_its_kept_worker(monkeypatch, stand_in):
+    """No run follows a failed or interrupted one to wait for the kept worker: ``drop_warmup`` ends it and clears
+    ``_later``; an unrelated process is ended without touching the kept one."""
+    kept, other = stand_in("pass"), stand_in("pass")
+    monkeypatch.setattr(compiled_driver, "_later", kept)
+    compiled_driver.drop_warmup(other)
+    assert other.poll() is not None and compiled_driver._later is kept and kept.poll() is None
+    compiled_driver.drop_warmup(kept)
+    assert kept.poll() is not None and compiled_driver._later is None

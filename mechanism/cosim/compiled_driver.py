@@ -231,6 +231,15 @@ def await_later(timeout: float = 120.0, poll: Callable[[], None] | None = None) 
         end_warmup(process)
 
 
+def drop_warmup(process: subprocess.Popen | None) -> None:
+    """End ``start_warmup``'s process whether or not it was kept (``_later``): for a run that failed or was
+    interrupted, after which no run waits for its later stages."""
+    global _later
+    if process is not None and process is _later:
+        _later = None
+    end_warmup(process)
+
+
 def end_warmup(process: subprocess.Popen | None) -> None:
     """End a warm-up process (killed if it still runs) and its output reader."""
     if process is None:

@@ -612,6 +612,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
                mininterval=0.5, leave=False)
     poll = getattr(observe, "poll", None) if loop.kernels and loop._observe_in_kernel else None
     warmup = None
+    completed = False
     if settings.compiled_loop and getattr(endpoint, "kind", None) in ("in-process", "fmu"):
         from mechanism.cosim import compiled_driver
         if loop.kernels:   # a first run: the loop's own functions compile in a second process (None if cached)
@@ -655,6 +656,7 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
                 bar.update(500)
                 if poll is not None:   # e.g. a signal noted by the driver (mechanism.run), when observe is compiled
                     poll(t)
+        completed = True
     except RunFailure as err:
         info["failure"] = {"step": err.step, "time_s": err.time, "cause": err.cause}
         return finish(rec, info, "failed", str(err), endpoint, bar, loop)
@@ -664,8 +666,10 @@ def run_master(system: System, q0: np.ndarray, qd0: np.ndarray, settings: Master
         return finish(rec, info, "failed", f"stopped at step {step} (t = {t:.9g} s): {cause}",
                       endpoint, bar, loop)
     finally:
-        if warmup is not None:   # not waited for (the Python loop ran, or a failure before the first chunk): end it
-            compiled_driver.finish_warmup(warmup, 0)
+        if warmup is not None and completed:   # not waited for (the Python loop ran): end it; kept: left to the
+            compiled_driver.finish_warmup(warmup, 0)    # ideal counterpart's run (compiled_driver.await_later)
+        elif warmup is not None:   # failed or interrupted: no run follows that would wait for it
+            compiled_driver.drop_warmup(warmup)
     return finish(rec, info, "completed", "", endpoint, bar, loop)
 
 
