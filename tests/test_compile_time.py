@@ -245,10 +245,13 @@ def test_a_first_fmu_run_starts_the_warmup_for_its_own_step(monkeypatch):
     assert seen == [(True, True)]
 
 
-KERNEL_MODULES = ("mechanism.multibody.kernels", "mechanism.cosim.compiled_loop", "mechanism.cosim.component_call",
-                  "mechanism.cosim.component_kernel", "mechanism.cosim.energy_kernel", "mechanism.cosim.fmu_native",
-                  "mechanism.cosim.law_kernel", "mechanism.cosim.law_model_kernel",
-                  "mechanism.cosim.monolithic_kernel")
+def _kernel_modules() -> list[str]:
+    """The modules that compile with numba, as the cache key finds them (``kernel_cache.sources``): a new one is
+    checked here without a list to extend."""
+    from mechanism import kernel_cache
+    names = [".".join(("mechanism", *p.relative_to(kernel_cache.PACKAGE).with_suffix("").parts))
+             for p in kernel_cache.sources()]
+    return [name for name in names if name != "mechanism.kernel_cache"]    # (its docstring mentions njit)
 
 
 def _kernels():
@@ -256,7 +259,7 @@ def _kernels():
     import importlib
 
     from numba.core.registry import CPUDispatcher
-    for name in KERNEL_MODULES:
+    for name in _kernel_modules():
         module = importlib.import_module(name)
         for attr, value in vars(module).items():
             if isinstance(value, CPUDispatcher) and value.py_func.__module__ == name:

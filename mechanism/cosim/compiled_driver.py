@@ -29,6 +29,7 @@ from mechanism.cosim import component_kernel as ck
 from mechanism.cosim import fmu_native
 from mechanism.cosim import law_model_kernel as lmk
 from mechanism.cosim.coupling import Exchanged
+from mechanism.cosim.coupling.base import FORCE_MODEL_FIELDS
 from mechanism.cosim.endpoints import ExchangeError
 from mechanism.cosim.energy import ENERGY_COLUMNS
 from mechanism.cosim.law_kernel import pack_bearing
@@ -204,6 +205,7 @@ def finish_warmup(process: subprocess.Popen | None, timeout: float = 300.0,
         if keep and process.poll() is None:
             end_warmup(_later)
             _later, process.later = process, later
+            atexit.unregister(end_warmup)       # one at a time is kept: one exit handler, for it
             atexit.register(end_warmup, process)
         else:
             end_warmup(process)
@@ -355,7 +357,7 @@ class CompiledLoop:
         # law-model's state (zeroed by each chunk), or None: the step compiled without law-model's
         self.LM = np.zeros(lmk.LM_SIZE) if self.law_model else None
         # the other schemes' force model (zeroed by each chunk), or None: the step compiled without them
-        self.FM = None if self.law_model else np.zeros(17)
+        self.FM = None if self.law_model else np.zeros(len(FORCE_MODEL_FIELDS))
         global _variant
         _variant = (self.P is None, self.law_model)
         self.fset = fset

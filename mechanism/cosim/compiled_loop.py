@@ -341,7 +341,7 @@ def run_steps(y, first, last, h, every, I, R, L, LR, W, u, dy, lam, p1, acc, sta
     schemes ``LM`` None and ``FM`` their force model's coefficients (17, ``kernels.force_of_model``; zeroed here).
     Every branch between the two is an ``if`` on the one that is None, so a run compiles, and a warm run loads,
     the step of its own component and scheme only (law-model's without the force models, ``kernels.advance`` and
-    their helpers, about 3 s of a first run's compile).
+    their helpers: the warm-up's loop stage 5.5 s instead of 7.9 s in two cold runs' timelines, docs/kernels.md).
     """
     mobility, sub_limit, max_cv, tol = fset[0], fset[1], fset[2], fset[3]
     max_sub, limit, predict, iterative, secant = iset[0], iset[1], iset[2] != 0, iset[3] != 0, iset[4] != 0

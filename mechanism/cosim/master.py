@@ -37,6 +37,7 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 
 from mechanism.cosim.coupling import DEFAULT_SCHEME, Exchanged, make_scheme
+from mechanism.cosim.coupling.base import FORCE_MODEL_FIELDS
 from mechanism.cosim.coupling.implicit import onset_jumps
 from mechanism.cosim.energy import ENERGY_COLUMNS, EnergyAccount, kinematic_cage_angle
 from mechanism.cosim.joint import BearingLink
@@ -190,7 +191,7 @@ class CouplingLoop:
                                          link.contact_points if link is not None else "centres")
         self._W = np.zeros(kn.workspace_size(self._I))
         self._u = np.zeros(6)
-        self._zero_fm = np.zeros(17)
+        self._zero_fm = np.zeros(len(FORCE_MODEL_FIELDS))
         self._dy = np.zeros(2 * self.n)       # dy/dt at the end state (the sample, the next step's first stage)
         self._lam = np.zeros(system.m)
         self._end = (None, None)              # (y, t) that _dy, _lam and W's kinematics belong to
@@ -324,7 +325,7 @@ class CouplingLoop:
         if fm is not None:     # the compiled step (kinematics of the end state included)
             if self._end[0] is not y:
                 self._end = (None, None)
-            if self.integrals is not None:   # the account's arrays also without one (see __init__): same state
+            if self.integrals is not None:   # (the account's arrays are passed also without one: see __init__)
                 self._acc[:] = 0.0
             k1_valid = self._k1_valid(y, t0, fm)
             y = y.copy()     # advanced in place

@@ -4,9 +4,9 @@ compile, on two cores).
 
 ``compiled_driver.start_warmup`` starts ``python -m mechanism.cosim.warmup`` when ``run_steps`` is not cached. The
 run's process compiles ``prepare``, ``max_violation`` and ``finish`` (and their callees) for ``CouplingLoop.start``
-and the first sample, then the energy account's kernels; this process compiles, stage by stage (``STAGES``), the
-loop's own functions, ``kernels.advance`` (by then the callees it shares with ``finish`` are mostly in the cache)
-and the component's exchange, printing each stage's name when it is done (about as long on an idle machine). The
+and the first sample, then the energy account's kernels (and ``kernels.advance`` when its step calls it,
+``RUN_SHARE``); this process compiles, stage by stage (``STAGES``), the loop's own functions, the scheme's (force
+models or law-model's step) and the component's exchange, printing each stage's name when it is done. The
 run waits (``compiled_driver.finish_warmup``) only for the stages its step needs (``needed``: an FMU run's step has
 no in-process law, only law-model's has law-model's functions, only the other schemes' their force models), and
 its compile of ``run_steps`` loads these functions from the cache instead of compiling them. This process is ended
