@@ -9,18 +9,24 @@ first run fills (docs/kernels.md, "Caching").
 
 ``configure`` runs when ``mechanism`` is imported, before numba is: the folder is
 ``$NUMBA_CACHE_DIR/mechanism-<key>`` if the user set ``NUMBA_CACHE_DIR``, else
-``mechanism/__pycache__/numba/mechanism-<key>``; child processes inherit it unchanged. An unwritable folder
-makes numba fall back to its own locations (the per-file check then applies again).
+``mechanism/__pycache__/numba/mechanism-<key>``; child processes inherit it unchanged. A process whose sources
+differ from its parent's (another checkout, an edit in between) sees another key in the inherited folder's name
+and uses a sibling folder for its own key, not a folder inside the parent's (which nested one key's folder in
+another's). An unwritable folder makes numba fall back to its own locations (the per-file check then applies
+again).
 """
 from __future__ import annotations
 
 import hashlib
 import os
+import re
 import sys
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent
 PREFIX = "mechanism-"
+#: the name of a folder ``folder`` made (for any key)
+_KEYED = re.compile(re.escape(PREFIX) + "[0-9a-f]{16}")
 
 
 def sources() -> list[Path]:
@@ -41,8 +47,8 @@ def folder(environ: dict | None = None) -> Path:
     environ = os.environ if environ is None else environ
     given = environ.get("NUMBA_CACHE_DIR", "").strip()
     name = PREFIX + key()
-    if given and Path(given).name == name:       # set by a parent process already
-        return Path(given)
+    if given and _KEYED.fullmatch(Path(given).name):   # set by a parent process: its key's folder, this one's or not
+        return Path(given).parent / name
     return (Path(given) if given else PACKAGE / "__pycache__" / "numba") / name
 
 

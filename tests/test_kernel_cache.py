@@ -31,6 +31,12 @@ def test_the_folder_under_the_users_cache_dir_and_inherited_unchanged(tmp_path):
     given = kernel_cache.folder({"NUMBA_CACHE_DIR": str(tmp_path)})
     assert given == tmp_path / name
     assert kernel_cache.folder({"NUMBA_CACHE_DIR": str(given)}) == given      # a child process's environment
+    # a child of other sources (an older key in the inherited name): a sibling for its own key, not a folder inside
+    older = tmp_path / (kernel_cache.PREFIX + "0123456789abcdef")
+    assert kernel_cache.folder({"NUMBA_CACHE_DIR": str(older)}) == given
+    # a folder of the user's own that only starts like ours is the user's base, as any other
+    own = tmp_path / (kernel_cache.PREFIX + "cache")
+    assert kernel_cache.folder({"NUMBA_CACHE_DIR": str(own)}) == own / name
 
 
 def test_numba_uses_the_folder():
