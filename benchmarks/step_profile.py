@@ -1,11 +1,13 @@
 """Where the compiled communication step's time goes, per kernel (Linux ``perf``; issue 11).
 
 Samples one run (``--mode`` cosim or inprocess, ``--scheme``, ``--revs`` at 1200 rpm and 1e-5 s, warm kernels) with
-``perf record`` and prints the time of each compiled kernel and of the C library's functions it calls (sin/cos,
-pow, numba's runtime) in µs per communication step: perf's sampled CPU time of the symbol over the run's steps,
-exclusive of the functions it calls. numba's machine code has no symbols perf can see, so the run writes perf's map
-file (``/tmp/perf-<pid>.map``) of every function numba's JIT engine holds before it exits; a kernel that LLVM
-inlined into its caller is counted in the caller.
+``perf record -e cpu-clock`` and prints the time of each function in µs per communication step: the compiled
+kernels, the C library's functions they call (sin/cos, pow, memset), numba's runtime, the FMU's own code, the
+interpreter around the loop, the OS kernel as one line; perf's sampled CPU time of the function over the run's
+steps, exclusive of the functions it calls. numba's machine code has no symbols perf can see, so the run writes perf's map
+file (``/tmp/perf-<pid>.map``, removed after the report) of every function numba's JIT engine holds before it
+exits; a kernel that LLVM inlined into its caller is counted in the caller, and the specialisations of one function
+are counted together.
 
     python benchmarks/step_profile.py [--mode inprocess] [--scheme law-model] [--revs 10] [--top 30]
 
@@ -63,7 +65,8 @@ def _child(out: str, fifos: str, mode: str, scheme: str | None, revs: float) -> 
             size = min(ordered[i + 1] - a if i + 1 < len(ordered) else 4096, 1 << 20)
             f.write(f"{a:x} {size:x} {addresses[a]}\n")
     steps = round(revs * config.crank_period / config.step)
-    Path(out).write_text(json.dumps({"steps": steps, "wall": wall, "ok": result.ok, "scheme": config.scheme}))
+    Path(out).write_text(json.dumps({"steps": steps, "wall": wall, "ok": result.ok, "scheme": config.scheme,
+                                     "pid": os.getpid()}))
 
 
 _COMPONENT = re.compile(r"(\d+)")
@@ -93,16 +96,19 @@ def python_name(symbol: str) -> str:
     return prefix + name if name else symbol
 
 
-def report(data: str) -> list[tuple[float, str]]:
-    """(sampled ns, symbol) of each symbol in perf's report of ``data``, largest first."""
-    text = subprocess.run(["perf", "report", "-i", data, "--stdio", "--no-children", "--sort", "sym",
-                           "--show-total-period"], check=True, capture_output=True, text=True).stdout
+def report(data: str) -> list[tuple[float, str, str]]:
+    """(sampled ns of cpu-clock, shared object, symbol) of each symbol in perf's report of ``data``, largest
+    first."""
+    text = subprocess.run(["perf", "report", "-i", data, "--stdio", "--no-children", "--no-demangle", "--sort",
+                           "dso,sym", "--show-total-period"], check=True, capture_output=True, text=True).stdout
     rows = []
     for line in text.splitlines():
-        m = re.match(r"\s*[\d.]+%\s+(\d+)\s+\[\S+\]\s+(\S+)", line)
+        m = re.match(r"\s*[\d.]+%\s+(\d+)\s+(.+?)\s+\[(\S)\]\s+(\S+)", line)   # a dso may hold spaces
         if m:
-            rows.append((float(m.group(1)), m.group(2)))
+            rows.append((float(m.group(1)), m.group(2), m.group(4) if m.group(3) == "." else "[kernel]"))
     return rows
+
+
 
 
 def main() -> int:
@@ -125,7 +131,7 @@ def main() -> int:
         ctl, ack = str(Path(tmp) / "ctl"), str(Path(tmp) / "ack")
         os.mkfifo(ctl)
         os.mkfifo(ack)
-        cmd = ["perf", "record", "-q", "-D", "-1", f"--control=fifo:{ctl},{ack}", "-o", data, "--",
+        cmd = ["perf", "record", "-q", "-e", "cpu-clock", "-D", "-1", f"--control=fifo:{ctl},{ack}", "-o", data, "--",
                sys.executable, str(Path(__file__).resolve()), "--child", out, "--fifos", f"{ctl},{ack}",
                "--mode", a.mode, "--revs", str(a.revs), *(["--scheme", a.scheme] if a.scheme else [])]
         done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -133,20 +139,30 @@ def main() -> int:
             print(f"error: the sampled run failed ({done.returncode}): {done.stderr.strip()[-300:]}", file=sys.stderr)
             return 1
         run = json.loads(Path(out).read_text())
-        rows = report(data)
+        try:
+            rows = report(data)
+        finally:
+            Path(f"/tmp/perf-{run['pid']}.map").unlink(missing_ok=True)
     if not run["ok"]:
         print("error: the sampled run did not complete", file=sys.stderr)
         return 1
     steps = run["steps"]
-    total = sum(ns for ns, _ in rows)
-    step_rows = [(ns, python_name(s)) for ns, s in rows
-                 if s.startswith("_ZN") or re.match(r"(__)?(sin|cos|sincos|pow|exp|log|ieee754|NRT_|mem(set|move|cpy|cmp))", s)]
-    in_step = sum(ns for ns, _ in step_rows)
+    total = sum(ns for ns, _, _ in rows)
+    merged: dict[str, float] = {}          # the specialisations of one function together; the OS kernel as one
+    for ns, _, symbol in rows:
+        name = python_name(symbol)
+        merged[name] = merged.get(name, 0.0) + ns
+    ranked = sorted(((ns, name) for name, ns in merged.items()), reverse=True)
+    numba = sum(ns for ns, _, symbol in rows if symbol.startswith("_ZN"))
     print(f"{a.mode} run, scheme {run['scheme']}, {a.revs:g} revolutions ({steps} steps): {run['wall'] * 1e6 / steps:.1f} µs "
-          f"per step by the wall clock (sampled); in numba's code and the C functions it calls "
-          f"{in_step / 1e3 / steps:.1f} µs per step ({in_step / total:.0%} of the {total / 1e9:.2f} s of CPU sampled)")
-    for ns, name in step_rows[:a.top]:
-        print(f"{ns / 1e3 / steps:8.3f} µs/step  {ns / in_step:6.1%}  {name}")
+          f"per step by the wall clock while sampled, {total / 1e3 / steps:.1f} µs of CPU sampled per step, of which "
+          f"{numba / 1e3 / steps:.1f} µs in numba's machine code (the rest: the C functions it calls, the interpreter "
+          f"around the loop, the OS)")
+    for ns, name in ranked[:a.top]:
+        print(f"{ns / 1e3 / steps:8.3f} µs/step  {ns / total:6.1%}  {name}")
+    rest = sum(ns for ns, _ in ranked[a.top:])
+    if rest:
+        print(f"{rest / 1e3 / steps:8.3f} µs/step  {rest / total:6.1%}  the other {len(ranked) - a.top} symbols")
     return 0
 
 

@@ -3,9 +3,12 @@
 numba's disk cache (``@njit(cache=True)``) checks only the decorated function's own file: a kernel that calls
 into another module (``compiled_loop.run_steps`` into the force law, the multibody kernels, the FMU's calls)
 would load its old machine code after an edit of that other module alone, and a run would give the old
-numbers with exit status 0. So the cache folder is named after a SHA-256 over every ``mechanism`` source that
-compiles with numba (the files that mention ``njit``): any edit of any of them starts a fresh cache, which the
-first run fills (docs/kernels.md, "Caching").
+numbers with exit status 0. The same holds for a module a kernel takes a constant from (numba folds a global
+into the machine code: ``fmu_bearing.parameters.DAMPING_CONSTANT``, ``fmu_bearing.life.P_STATIONARY``). So the
+cache folder is named after a SHA-256 over every ``mechanism`` source that compiles with numba (the files that
+mention ``njit``) and every module of ``mechanism`` and ``fmu_bearing`` they import, directly or through each
+other (``dependencies``): any edit of any of them starts a fresh cache, which the first run fills
+(docs/kernels.md, "Caching").
 
 ``configure`` runs when ``mechanism`` is imported, before numba is: the folder is
 ``$NUMBA_CACHE_DIR/mechanism-<key>`` if the user set ``NUMBA_CACHE_DIR``, else
@@ -34,11 +37,48 @@ def sources() -> list[Path]:
     return sorted(p for p in PACKAGE.rglob("*.py") if "njit" in p.read_text(encoding="utf-8", errors="replace"))
 
 
+#: an import of a module of the two packages: ``from mechanism.x import a, b`` (a, b may be submodules) or
+#: ``import fmu_bearing.y``, at any indentation
+_IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+((?:mechanism|fmu_bearing)(?:\.\w+)*)[ \t]+import[ \t]+"
+                     r"(?:\(([^)]*)\)|([\w, \t]*))|import[ \t]+((?:mechanism|fmu_bearing)(?:\.\w+)*))", re.M)
+
+
+def _module_file(module: str) -> Path | None:
+    """The file of a module of ``mechanism`` or ``fmu_bearing`` (their folders side by side), or None."""
+    parts = module.split(".")
+    base = PACKAGE if parts[0] == "mechanism" else PACKAGE.parent / parts[0]
+    path = base.joinpath(*parts[1:])
+    for candidate in (path / "__init__.py", path.with_suffix(".py")):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def dependencies() -> list[Path]:
+    """The modules of ``mechanism`` and ``fmu_bearing`` that the compiled modules import, directly or through each
+    other, that do not compile with numba themselves: a kernel may fold their constants in (found from the import
+    statements' text: a conservative superset)."""
+    compiled = set(sources())
+    seen: set[Path] = set(compiled)
+    todo = list(compiled)
+    while todo:
+        text = todo.pop().read_text(encoding="utf-8", errors="replace")
+        for m in _IMPORT.finditer(text):
+            module = m.group(1) or m.group(4)
+            names = re.findall(r"\w+", m.group(2) or m.group(3) or "")
+            for path in (_module_file(module), *(_module_file(f"{module}.{n}") for n in names)):
+                if path is not None and path not in seen:
+                    seen.add(path)
+                    todo.append(path)
+    return sorted(seen - compiled)
+
+
 def key() -> str:
-    """16 hex digits of the SHA-256 over the compiled modules' relative paths and bytes."""
+    """16 hex digits of the SHA-256 over the compiled modules' and their dependencies' paths (relative to the
+    packages' folder) and bytes."""
     h = hashlib.sha256()
-    for path in sources():
-        h.update(path.relative_to(PACKAGE).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    for path in (*sources(), *dependencies()):
+        h.update(path.relative_to(PACKAGE.parent).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()[:16]
 
 
@@ -55,7 +95,7 @@ def folder(environ: dict | None = None) -> Path:
 def configure() -> Path:
     """Point numba's cache at ``folder()`` (the environment for numba's import and for child processes; numba's
     config too if it is imported already)."""
-    path = folder()
+    path = folder().absolute()        # child processes may start in another folder (the warm-up's is the root's)
     os.environ["NUMBA_CACHE_DIR"] = str(path)
     config = getattr(sys.modules.get("numba"), "config", None)
     if config is not None:

@@ -56,3 +56,39 @@ def test_numba_uses_the_folder():
     assert config == environ and os.path.basename(config) == name
     assert config == str(kernel_cache.PACKAGE / "__pycache__" / "numba" / name)
     assert path.startswith(config)
+
+
+def test_the_key_follows_the_modules_a_kernel_takes_constants_from(tmp_path, monkeypatch):
+    """numba folds a kernel's globals into its machine code, so the key covers the modules the compiled ones import
+    (through each other too: fmu_bearing.parameters' own import here), and an edit of one starts a fresh cache; a
+    module no kernel reaches does not."""
+    pkg, fb = tmp_path / "mechanism", tmp_path / "fmu_bearing"
+    (pkg / "cosim").mkdir(parents=True)
+    fb.mkdir()
+    (pkg / "cosim" / "law_kernel.py").write_text(
+        "from numba import njit\n\nfrom fmu_bearing.parameters import (\n    DAMPING_CONSTANT,\n)\n"
+        "from mechanism.cosim.joint import LINK\n")
+    (pkg / "cosim" / "joint.py").write_text("LINK = 1\n")
+    (fb / "__init__.py").write_text("")
+    (fb / "parameters.py").write_text("    from fmu_bearing import units\nDAMPING_CONSTANT = 1\n")
+    (fb / "units.py").write_text("MM = 1e-3\n")
+    (fb / "slave.py").write_text("# no kernel imports this\n")
+    monkeypatch.setattr(kernel_cache, "PACKAGE", pkg)
+    assert [p.relative_to(tmp_path).as_posix() for p in kernel_cache.dependencies()] == [
+        "fmu_bearing/__init__.py", "fmu_bearing/parameters.py", "fmu_bearing/units.py", "mechanism/cosim/joint.py"]
+    before = kernel_cache.key()
+    (fb / "slave.py").write_text("# edited\n")
+    assert kernel_cache.key() == before
+    for edited in (fb / "units.py", fb / "parameters.py", pkg / "cosim" / "joint.py"):
+        edited.write_text(edited.read_text() + "# edited\n")
+        assert kernel_cache.key() != before, edited.name
+        before = kernel_cache.key()
+
+
+def test_the_real_kernels_dependencies():
+    """The constants' modules the kernels use today are in the key: the damping model's codes, the life's exponents
+    (and a module imported after a multi-line import, which a greedy pattern once swallowed)."""
+    names = {p.relative_to(kernel_cache.PACKAGE.parent).as_posix() for p in kernel_cache.dependencies()}
+    assert {"fmu_bearing/parameters.py", "fmu_bearing/life.py", "fmu_bearing/ball_bearing.py",
+            "mechanism/cosim/joint.py"} <= names
+    assert not names & {p.relative_to(kernel_cache.PACKAGE.parent).as_posix() for p in kernel_cache.sources()}
