@@ -175,8 +175,8 @@ def main() -> None:
     steps = round(a.revs * base.crank_period / a.step)
     print(f"{a.revs:g} revolutions at {a.rpm:g} rpm, step {a.step:g} s ({steps} communication steps), "
           f"scheme {base.scheme}, medians of {a.repeat}; per step: the steps alone (the run less a "
-          f"{SHORT_REVS:g}-revolution run), the ratio to the exchange of the same repeat, [the whole run over its "
-          f"steps, setup included]")
+          f"{SHORT_REVS:g}-revolution run), [the whole run over its steps, setup included]; a ratio: the median of "
+          f"each repeat's figure over that repeat's exchange")
     print(f"bare fmpy exchange (set 6, doStep, get 8)  {med['bare']:8.1f} µs/call")
     # each repeat's loop against the same repeat's exchange (the machine's speed drifts between repeats), their median
     ratio = {name: statistics.median(x / b for x, b in zip(samples[name + " steps"], samples["bare"]))
@@ -188,9 +188,10 @@ def main() -> None:
                "ideal": "x the bare exchange"}
     labels = {"cosim": "co-simulation loop (FMU)", "inprocess": "in-process loop (force law in-process)",
               "ideal": "ideal-joint loop (no bearing)"}
+    whole = {name: statistics.median(x / b for x, b in zip(samples[name], samples["bare"])) for name in configs}
     for name in configs:
         print(f"{labels[name]:<42} {med[name + ' steps']:8.1f} µs/step   {ratio[name]:6.2f} "
-              f"{targets[name]}   [{med[name]:.1f} µs/step, {med[name] / med['bare']:.2f} x]")
+              f"{targets[name]}   [{med[name]:.1f} µs/step, {whole[name]:.2f} x]")
     same = (a.revs, a.rpm, a.step, base.scheme) == (2.0, 1200.0, 1e-5, RunConfig().scheme)   # the headline's run
     for label, env in (("", None), *(("outputs in-process", {"MECHANISM_OUTPUT_WORKERS": "0"}),) * a.outputs_pair):
         h = headline(env)

@@ -111,6 +111,11 @@ def report(data: str) -> list[tuple[float, str, str]]:
 
 
 
+def _numba(dso: str, symbol: str) -> bool:
+    """A function of numba's machine code: perf found it through the map (not a C++ symbol of numpy's or LLVM's)."""
+    return symbol.startswith("_ZN") and (dso.startswith("perf-") or dso.startswith("[JIT]"))
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--mode", choices=("cosim", "inprocess"), default="inprocess")
@@ -149,11 +154,11 @@ def main() -> int:
     steps = run["steps"]
     total = sum(ns for ns, _, _ in rows)
     merged: dict[str, float] = {}          # the specialisations of one function together; the OS kernel as one
-    for ns, _, symbol in rows:
-        name = python_name(symbol)
+    for ns, dso, symbol in rows:
+        name = python_name(symbol) if _numba(dso, symbol) else symbol
         merged[name] = merged.get(name, 0.0) + ns
     ranked = sorted(((ns, name) for name, ns in merged.items()), reverse=True)
-    numba = sum(ns for ns, _, symbol in rows if symbol.startswith("_ZN"))
+    numba = sum(ns for ns, dso, symbol in rows if _numba(dso, symbol))
     print(f"{a.mode} run, scheme {run['scheme']}, {a.revs:g} revolutions ({steps} steps): {run['wall'] * 1e6 / steps:.1f} µs "
           f"per step by the wall clock while sampled, {total / 1e3 / steps:.1f} µs of CPU sampled per step, of which "
           f"{numba / 1e3 / steps:.1f} µs in numba's machine code (the rest: the C functions it calls, the interpreter "

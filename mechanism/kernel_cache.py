@@ -7,7 +7,7 @@ numbers with exit status 0. The same holds for a module a kernel takes a constan
 into the machine code: ``fmu_bearing.parameters.DAMPING_CONSTANT``, ``fmu_bearing.life.P_STATIONARY``). So the
 cache folder is named after a SHA-256 over every ``mechanism`` source that compiles with numba (the files that
 mention ``njit``) and every module of ``mechanism`` and ``fmu_bearing`` they import, directly or through each
-other (``dependencies``): any edit of any of them starts a fresh cache, which the first run fills
+other (``dependencies``, from their import statements): any edit of any of them starts a fresh cache, which the first run fills
 (docs/kernels.md, "Caching").
 
 ``configure`` runs when ``mechanism`` is imported, before numba is: the folder is
@@ -21,6 +21,7 @@ again).
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import os
 import re
 import sys
@@ -37,48 +38,103 @@ def sources() -> list[Path]:
     return sorted(p for p in PACKAGE.rglob("*.py") if "njit" in p.read_text(encoding="utf-8", errors="replace"))
 
 
-#: an import of a module of the two packages: ``from mechanism.x import a, b`` (a, b may be submodules) or
-#: ``import fmu_bearing.y``, at any indentation
-_IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+((?:mechanism|fmu_bearing)(?:\.\w+)*)[ \t]+import[ \t]+"
-                     r"(?:\(([^)]*)\)|([\w, \t]*))|import[ \t]+((?:mechanism|fmu_bearing)(?:\.\w+)*))", re.M)
+#: the packages a kernel may take constants from (their modules' files are in the key when the kernels import them)
+PACKAGES = ("mechanism", "fmu_bearing")
+
+
+def _root(top: str) -> Path | None:
+    """The folder of the top-level package ``top``: this one for ``mechanism``; ``fmu_bearing`` beside it, as the
+    project installs them, else where Python finds it (without importing it)."""
+    if top == "mechanism":
+        return PACKAGE
+    beside = PACKAGE.parent / top
+    if beside.is_dir():
+        return beside
+    spec = importlib.util.find_spec(top)
+    locations = spec.submodule_search_locations if spec is not None else None
+    return Path(locations[0]) if locations else None
 
 
 def _module_file(module: str) -> Path | None:
-    """The file of a module of ``mechanism`` or ``fmu_bearing`` (their folders side by side), or None."""
-    parts = module.split(".")
-    base = PACKAGE if parts[0] == "mechanism" else PACKAGE.parent / parts[0]
-    path = base.joinpath(*parts[1:])
+    """The file of a module of ``PACKAGES`` (a package's ``__init__.py``), or None (not one of theirs, or no file)."""
+    top, *rest = module.split(".")
+    root = _root(top) if top in PACKAGES else None
+    if root is None:
+        return None
+    path = root.joinpath(*rest)
     for candidate in (path / "__init__.py", path.with_suffix(".py")):
         if candidate.is_file():
             return candidate
     return None
 
 
-def dependencies() -> list[Path]:
-    """The modules of ``mechanism`` and ``fmu_bearing`` that the compiled modules import, directly or through each
-    other, that do not compile with numba themselves: a kernel may fold their constants in (found from the import
-    statements' text: a conservative superset)."""
-    compiled = set(sources())
-    seen: set[Path] = set(compiled)
-    todo = list(compiled)
+def _module_name(path: Path) -> tuple[str, bool]:
+    """(the dotted name of the module in ``path``, whether it is a package's ``__init__``)."""
+    for top in PACKAGES:
+        root = _root(top)
+        if root is not None and path.is_relative_to(root):
+            parts = [top, *path.relative_to(root).with_suffix("").parts]
+            return ".".join(parts[:-1] if parts[-1] == "__init__" else parts), parts[-1] == "__init__"
+    raise ValueError(f"{path} is in none of {PACKAGES}")
+
+
+#: an import statement at any indentation: ``from [dots]module import a, b as c`` or its parenthesised form over
+#: several lines (groups: dots, module, the names in parentheses, the names on the line), or ``import a.b as c, d``
+_IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+(\.*)((?:\w+(?:\.\w+)*)?)[ \t]+import[ \t]+(?:\(([^)]*)\)|([^\n#;]*))"
+                     r"|import[ \t]+([^\n#;]+))", re.M)
+
+
+def _first_words(names: str) -> list[str]:
+    """``a, b as c`` (a parenthesised list's comments and line breaks too) as [a, b]."""
+    items = (re.sub(r"#[^\n]*", "", item).split() for item in names.split(","))
+    return [words[0] for words in items if words]
+
+
+def _imported(path: Path) -> set[str]:
+    """The dotted names a module's import statements name, anywhere in it (``from . import x`` resolved; for
+    ``from m import a`` both m and m.a, as a may be a submodule). Read from the text with a pattern, not parsed:
+    this runs at every ``import mechanism`` (an ``ast`` parse of the 23 files took 0.1 s)."""
+    module, is_package = _module_name(path)
+    package = module if is_package else module.rpartition(".")[0]
+    names: set[str] = set()
+    for m in _IMPORT.finditer(path.read_text(encoding="utf-8", errors="replace")):
+        dots, base, listed = m.group(1), m.group(2), m.group(3) or m.group(4)
+        if m.group(5) is not None:
+            names.update(_first_words(m.group(5)))
+            continue
+        if dots:
+            try:
+                base = importlib.util.resolve_name(dots + base, package)
+            except (ImportError, ValueError):      # beyond the top-level package: not one of ours
+                continue
+        names.add(base)
+        names.update(f"{base}.{name}" for name in _first_words(listed or ""))
+    return names
+
+
+def dependencies(compiled: list[Path] | None = None) -> list[Path]:
+    """The modules of ``PACKAGES`` that the compiled modules (``sources()``) import, directly or through each other,
+    and that do not compile with numba themselves: a kernel may fold their constants into its machine code (a
+    superset: every import statement counts, in a function too)."""
+    compiled_set = set(sources() if compiled is None else compiled)
+    seen = set(compiled_set)
+    todo = list(compiled_set)
     while todo:
-        text = todo.pop().read_text(encoding="utf-8", errors="replace")
-        for m in _IMPORT.finditer(text):
-            module = m.group(1) or m.group(4)
-            names = re.findall(r"\w+", m.group(2) or m.group(3) or "")
-            for path in (_module_file(module), *(_module_file(f"{module}.{n}") for n in names)):
-                if path is not None and path not in seen:
-                    seen.add(path)
-                    todo.append(path)
-    return sorted(seen - compiled)
+        for name in _imported(todo.pop()):
+            path = _module_file(name)
+            if path is not None and path not in seen:
+                seen.add(path)
+                todo.append(path)
+    return sorted(seen - compiled_set)
 
 
 def key() -> str:
-    """16 hex digits of the SHA-256 over the compiled modules' and their dependencies' paths (relative to the
-    packages' folder) and bytes."""
+    """16 hex digits of the SHA-256 over the compiled modules' and their dependencies' dotted names and bytes."""
     h = hashlib.sha256()
-    for path in (*sources(), *dependencies()):
-        h.update(path.relative_to(PACKAGE.parent).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    compiled = sources()
+    for path in (*compiled, *dependencies(compiled)):
+        name, is_package = _module_name(path)
+        h.update(f"{name}{'.__init__' if is_package else ''}".encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()[:16]
 
 

@@ -70,7 +70,8 @@ def test_the_key_follows_the_modules_a_kernel_takes_constants_from(tmp_path, mon
         "from mechanism.cosim.joint import LINK\n")
     (pkg / "cosim" / "joint.py").write_text("LINK = 1\n")
     (fb / "__init__.py").write_text("")
-    (fb / "parameters.py").write_text("    from fmu_bearing import units\nDAMPING_CONSTANT = 1\n")
+    (fb / "parameters.py").write_text("def _units():\n    from . import units  # in a function, relative\n"
+                                      "    return units\n\n\nDAMPING_CONSTANT = 1\n")
     (fb / "units.py").write_text("MM = 1e-3\n")
     (fb / "slave.py").write_text("# no kernel imports this\n")
     monkeypatch.setattr(kernel_cache, "PACKAGE", pkg)
@@ -87,8 +88,9 @@ def test_the_key_follows_the_modules_a_kernel_takes_constants_from(tmp_path, mon
 
 def test_the_real_kernels_dependencies():
     """The constants' modules the kernels use today are in the key: the damping model's codes, the life's exponents
-    (and a module imported after a multi-line import, which a greedy pattern once swallowed)."""
+    (and a module imported after a one-line import, which a greedy pattern once swallowed, and one imported
+    relatively)."""
     names = {p.relative_to(kernel_cache.PACKAGE.parent).as_posix() for p in kernel_cache.dependencies()}
     assert {"fmu_bearing/parameters.py", "fmu_bearing/life.py", "fmu_bearing/ball_bearing.py",
-            "mechanism/cosim/joint.py"} <= names
+            "fmu_bearing/hertz.py", "mechanism/cosim/joint.py"} <= names     # hertz: ball_bearing's `from . import`
     assert not names & {p.relative_to(kernel_cache.PACKAGE.parent).as_posix() for p in kernel_cache.sources()}
