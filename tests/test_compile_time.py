@@ -249,8 +249,7 @@ def _kernel_modules() -> list[str]:
     """The modules that compile with numba, as the cache key finds them (``kernel_cache.sources``): a new one is
     checked here without a list to extend."""
     from mechanism import kernel_cache
-    names = [".".join(("mechanism", *p.relative_to(kernel_cache.PACKAGE).with_suffix("").parts))
-             for p in kernel_cache.sources()]
+    names = [kernel_cache._module_name(p)[0] for p in kernel_cache.sources()]
     return [name for name in names if name != "mechanism.kernel_cache"]    # (its docstring mentions njit)
 
 
@@ -284,7 +283,7 @@ def test_a_kernel_for_compiled_callers_refuses_a_python_call():
     assert {("mechanism.cosim.law_model_kernel", "advance"), ("mechanism.multibody.kernels", "_kinematics"),
             ("mechanism.cosim.compiled_loop", "trial_model"), ("mechanism.cosim.component_kernel", "law_exchange"),
             } <= {(m, n) for m, n, _ in internal}
-    assert len(internal) == 28      # docs/kernels.md, "Fifth pass"
+    assert len(internal) == 27      # docs/kernels.md, "Fifth pass" (28 then; law-model's _eig_max is law_kernel's since)
     for module, name, dispatcher in _kernels():     # no Python entry exactly where a Python call is refused
         assert isinstance(dispatcher, kn.CompiledOnly) == bool(dispatcher.targetoptions.get("no_cpython_wrapper")), \
             (module, name)
@@ -314,3 +313,14 @@ def test_a_failed_or_interrupted_run_drops_its_kept_worker(monkeypatch, stand_in
     assert other.poll() is not None and compiled_driver._later is kept and kept.poll() is None
     compiled_driver.drop_warmup(kept)
     assert kept.poll() is not None and compiled_driver._later is None
+
+
+def test_the_warmup_refuses_an_unknown_stage_in_one_line():
+    """``python -m mechanism.cosim.warmup`` with a stage it does not have: status 2, one line naming it and the
+    stages, nothing compiled (no traceback)."""
+    done = subprocess.run([sys.executable, "-m", "mechanism.cosim.warmup", "loop", "lawmodel"], cwd=ROOT,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)), capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.strip().splitlines() == [
+        "error: no warm-up stage 'lawmodel' (the stages: loop, force-model, advance, fmu, in-process, law-model, "
+        "energy)"]

@@ -31,7 +31,7 @@ def reference():
     return r
 
 
-def test_law_model_is_secondobserved_order(reference):
+def test_law_model_is_third_order(reference):
     """The default scheme's order (issue 12 item 5): law-model is the default (DEFAULT_SCHEME)."""
     from mechanism.cosim.coupling import DEFAULT_SCHEME
     assert DEFAULT_SCHEME == "law-model"

@@ -40,7 +40,12 @@ from mechanism.cosim import component_call as cc
 from mechanism.cosim import fmu_native
 from mechanism.cosim import law_model_kernel as lmk
 from mechanism.cosim.energy_kernel import stage_integrals
-from mechanism.cosim.law_kernel import HEADER, edge_tolerance, elastic_energy
+from mechanism.cosim.law_kernel import (
+    HEADER,
+    edge_tolerance,
+    elastic_energy,
+    sym_eig_max,
+)
 from mechanism.multibody.kernels import (
     KERNEL,
     advance,
@@ -86,12 +91,6 @@ def _copy_rows(dst, src, rows):
     for i in range(rows):
         for j in range(src.shape[1]):
             dst[i, j] = src[i, j]
-
-
-@njit(**KERNEL, inline="always")
-def sym_eig_max(a, b, c):
-    """Largest eigenvalue of [[a, b], [b, c]] (``master._sym_eig_max``)."""
-    return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
 
 
 @njit(**KERNEL)

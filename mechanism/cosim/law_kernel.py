@@ -122,6 +122,13 @@ def evaluate(P, e_x, e_y, v_x, v_y, cage_angle, omega_inner, omega_outer, out, l
 
 
 @njit(**KERNEL, inline="always")
+def sym_eig_max(a, b, c):
+    """Largest eigenvalue of [[a, b], [b, c]] (``coupling.base.sym_eig_max``, same arithmetic): the stiffest
+    direction of a tangent K or C, for the substep counts of the compiled loop and of law-model's step."""
+    return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
+
+
+@njit(**KERNEL, inline="always")
 def edge_tolerance(half, e_x, e_y, angle):
     """The margin [m] beyond which a ball's deflection delta_r = e . u_r - P_d/2 (eq. 18) computed from e in the cage's
     frame and the table of the balls' places (cos, sin of 2 pi r / nb; one cos, sin per cage ``angle`` [rad]) has the

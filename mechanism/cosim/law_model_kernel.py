@@ -23,7 +23,7 @@ import math
 from numba import njit
 
 from fmu_bearing.parameters import DAMPING_CONSTANT
-from mechanism.cosim.law_kernel import HEADER, edge_tolerance, evaluate
+from mechanism.cosim.law_kernel import HEADER, edge_tolerance, evaluate, sym_eig_max
 from mechanism.multibody.kernels import (
     LEAF,
     _applied,
@@ -48,17 +48,11 @@ LM_FIELDS = ("t", "h", "cage", "omega", "wi", "wo", "c0_x", "c0_y", "c1_x", "c1_
 LM_SIZE = len(LM_FIELDS)
 
 
-@internal(LEAF)
-def _eig_max(a, b, c):
-    """Largest eigenvalue of [[a, b], [b, c]] (``law_model._eig_max``)."""
-    return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
-
-
 @njit(**LEAF)
 def law(LM, P, out, loads, s, e_x, e_y, v_x, v_y):
     """``LawModel._law``: F_law(e, v; phi_n + omega_m s) [N] (eq. 18-19) into out; keeps the stiffest tangent."""
     evaluate(P, e_x, e_y, v_x, v_y, LM[2] + LM[3] * s, LM[4], LM[5], out, loads)
-    k = _eig_max(out[2], out[3], out[4])
+    k = sym_eig_max(out[2], out[3], out[4])
     if k > LM[10]:
         LM[10] = k
         for i in range(6):
@@ -80,7 +74,7 @@ def begin(LM, P, out, loads, a, x, have_trial, h):
     last pass's end exchange x: a new step's stiffest tangent (the start's, the law at the predicted end), c_n
     and c* (c_n on the first pass)."""
     if not have_trial:
-        LM[10] = _eig_max(a[7], a[8], a[9])
+        LM[10] = sym_eig_max(a[7], a[8], a[9])
         for i in range(6):
             LM[11 + i] = a[7 + i]
         law(LM, P, out, loads, h, a[1] + h * a[3], a[2] + h * a[4], a[3], a[4])

@@ -37,7 +37,7 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 
 from mechanism.cosim.coupling import DEFAULT_SCHEME, Exchanged, make_scheme
-from mechanism.cosim.coupling.base import FORCE_MODEL_FIELDS
+from mechanism.cosim.coupling.base import FORCE_MODEL_FIELDS, sym_eig_max
 from mechanism.cosim.coupling.implicit import onset_jumps
 from mechanism.cosim.energy import ENERGY_COLUMNS, EnergyAccount, kinematic_cage_angle
 from mechanism.cosim.joint import BearingLink
@@ -92,11 +92,6 @@ class MasterSettings:
 Observer = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float], dict]
 
 
-def _sym_eig_max(a: float, b: float, c: float) -> float:
-    """Largest eigenvalue of the symmetric 2x2 matrix [[a, b], [b, c]]."""
-    return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
-
-
 def substeps(h: float, x: Exchanged, mobility: float, limit: float, cap: int) -> int:
     """RK4 substeps per communication step for the interface-Jacobian force model.
 
@@ -104,8 +99,8 @@ def substeps(h: float, x: Exchanged, mobility: float, limit: float, cap: int) ->
     relative mobility g give a contact frequency sqrt(k g) and a damping rate c g; RK4 is
     stable up to about 2.8 in h_sub times either, so ``limit`` = 1 keeps a wide margin.
     """
-    k = max(_sym_eig_max(x.k_xx, x.k_xy, x.k_yy), 0.0)
-    c = max(_sym_eig_max(x.c_xx, x.c_xy, x.c_yy), 0.0)
+    k = max(sym_eig_max(x.k_xx, x.k_xy, x.k_yy), 0.0)
+    c = max(sym_eig_max(x.c_xx, x.c_xy, x.c_yy), 0.0)
     rate = math.sqrt(k * mobility) + c * mobility
     return max(1, min(cap, math.ceil(h * rate / limit)))
 
@@ -501,8 +496,8 @@ class CouplingLoop:
             dx, dy = mismatch
         d = math.hypot(dx, dy) * self.mobility
         de, dv = d * h * h / 6.0, d * h / 2.0
-        k = max(_sym_eig_max(b.k_xx, b.k_xy, b.k_yy), 0.0)
-        c = max(_sym_eig_max(b.c_xx, b.c_xy, b.c_yy), 0.0)
+        k = max(sym_eig_max(b.k_xx, b.k_xy, b.k_yy), 0.0)
+        c = max(sym_eig_max(b.c_xx, b.c_xy, b.c_yy), 0.0)
         tol = self.settings.iteration_tol
         return (k * de + c * dv <= tol * max(1.0, abs(b.F_x), abs(b.F_y))
                 and de <= tol * max(1e-6, math.hypot(b.e_x, b.e_y)))

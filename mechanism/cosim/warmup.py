@@ -124,11 +124,18 @@ def compile_stages(names, done=None) -> None:
             done(name)
 
 
-def main(names: list[str] | None = None) -> None:
+def main(names: list[str] | None = None) -> int:
     """Compile (or load from the cache) the stages ``names`` in their order (default: all, in ``STAGES``' order),
-    printing each stage's name when it is in the cache."""
-    compile_stages([name for name, _ in STAGES] if names is None else names, lambda name: print(name, flush=True))
+    printing each stage's name when it is in the cache. An unknown name: one line naming it and the stages on
+    standard error, status 2, nothing compiled."""
+    known = [name for name, _ in STAGES]
+    unknown = [name for name in names or () if name not in known]
+    if unknown:
+        print(f"error: no warm-up stage {unknown[0]!r} (the stages: {', '.join(known)})", file=sys.stderr)
+        return 2
+    compile_stages(known if names is None else names, lambda name: print(name, flush=True))
+    return 0
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:] or None)
+    sys.exit(main(sys.argv[1:] or None))

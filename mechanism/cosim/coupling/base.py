@@ -22,10 +22,18 @@ Two ways to say the force, one meaning:
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+
+
+def sym_eig_max(a: float, b: float, c: float) -> float:
+    """Largest eigenvalue of the symmetric 2x2 matrix [[a, b], [b, c]] (a tangent K or C of ``Exchanged``: the
+    stiffest direction; compiled as ``law_kernel.sym_eig_max``)."""
+    return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
+
 
 #: Layout of ``ForceModel.coefficients`` (float64, length 17), the array the compiled step reads.
 FORCE_MODEL_FIELDS = ("t_ref", "F0_x", "F0_y", "a1_x", "a1_y", "a2_x", "a2_y", "e0_x", "e0_y", "v0_x", "v0_y",

@@ -40,7 +40,7 @@ import math
 from fmu_bearing.ball_bearing import BallBearing
 from fmu_bearing.parameters import DAMPING_CONSTANT
 
-from .base import Exchanged
+from .base import Exchanged, sym_eig_max
 from .implicit import InterfaceJacobianImplicit
 
 
@@ -106,7 +106,7 @@ class LawModel(InterfaceJacobianImplicit):
     def _law(self, s: float, e_x: float, e_y: float, v_x: float, v_y: float) -> tuple[float, float]:
         """F_law(e, v; phi_n + omega_m s) [N] (eq. 18-19); keeps the stiffest tangent seen in this step."""
         out = self._evaluate(e_x, e_y, v_x, v_y, self._cage + self._omega * s, self._wi, self._wo)
-        k = _eig_max(out[2], out[3], out[4])
+        k = sym_eig_max(out[2], out[3], out[4])
         if k > self._k_seen:
             self._k_seen, self._tangent = k, (float(out[2]), float(out[3]), float(out[4]),
                                               float(out[5]), float(out[6]), float(out[7]))
@@ -118,7 +118,7 @@ class LawModel(InterfaceJacobianImplicit):
             return
         a = self.past[-1]
         if self.trial is None:    # a new step: the stiffest tangent so far is the start's or the predicted end's
-            self._k_seen, self._tangent = _eig_max(a.k_xx, a.k_xy, a.k_yy), (a.k_xx, a.k_xy, a.k_yy,
+            self._k_seen, self._tangent = sym_eig_max(a.k_xx, a.k_xy, a.k_yy), (a.k_xx, a.k_xy, a.k_yy,
                                                                              a.c_xx, a.c_xy, a.c_yy)
             self._law(h, a.e_x + h * a.v_x, a.e_y + h * a.v_y, a.v_x, a.v_y)
         fx, fy = self._law(0.0, a.e_x, a.e_y, a.v_x, a.v_y)
@@ -278,8 +278,3 @@ def onset_weights(theta: float, j: float, d: float) -> tuple[float, float]:
     a = j * r + d * r * r / 2.0 - (4.0 * fm + f1) / 6.0
     b = j * r * r / 2.0 + d * r * r * r / 6.0 - fm / 3.0
     return 6.0 * b - 2.0 * a, 6.0 * a - 12.0 * b
-
-
-def _eig_max(a: float, b: float, c: float) -> float:
-    """Largest eigenvalue of the symmetric 2x2 matrix [[a, b], [b, c]]."""
-    return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
